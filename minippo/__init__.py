@@ -1,0 +1,6 @@
+"""minippo: Proximal Policy Optimization in NumPy, with every gradient derived by hand."""
+
+from minippo.ppo import Config, train
+
+__all__ = ["Config", "train"]
+__version__ = "0.1.0"

@@ -1,0 +1,3 @@
+from minippo.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,139 @@
+"""The actor-critic: the policy π_θ and the value function V, as two MLPs (the paper's MuJoCo setup) or one shared
+trunk with two heads (eq. 9), all parameters in one flat vector. Saving and loading the policy live here too."""
+
+from __future__ import annotations
+
+import json
+import os
+import zipfile
+
+import numpy as np
+
+from minippo.distributions import Categorical, DiagGaussian
+from minippo.errors import MinippoError
+from minippo.network import MLP
+from minippo.normalization import ObservationNormalizer
+
+SQRT2 = float(np.sqrt(2.0))
+
+
+class ActorCritic:
+    def __init__(
+        self,
+        obs_dim: int,
+        kind: str,
+        act_dim: int,
+        hidden_sizes=(64, 64),
+        shared: bool = False,
+        log_std_init: float = 0.0,
+        orthogonal_init: bool = True,
+        rng: np.random.Generator | None = None,
+    ):
+        if kind not in ("discrete", "continuous"):
+            raise ValueError(f"kind must be 'discrete' or 'continuous', not {kind!r}")
+        self.obs_dim, self.kind, self.act_dim = int(obs_dim), kind, int(act_dim)
+        self.hidden_sizes, self.shared = tuple(int(h) for h in hidden_sizes), bool(shared)
+        hidden = self.hidden_sizes
+        if shared:
+            specs = [  # (name, sizes, output gain, tanh after the last layer)
+                ("trunk", (obs_dim, *hidden), SQRT2, True),
+                ("policy", (hidden[-1], act_dim), 0.01, False),
+                ("value", (hidden[-1], 1), 1.0, False),
+            ]
+        else:
+            specs = [("policy", (obs_dim, *hidden, act_dim), 0.01, False), ("value", (obs_dim, *hidden, 1), 1.0, False)]
+        sizes = [MLP(s, activate_output=a).n_params for _, s, _, a in specs]
+        n_log_std = act_dim if kind == "continuous" else 0
+        self.params = np.zeros(sum(sizes) + n_log_std)
+        self.grads = np.zeros_like(self.params)
+        offset, self.nets = 0, {}
+        for (name, net_sizes, gain, activate), size in zip(specs, sizes):
+            view = slice(offset, offset + size)
+            self.nets[name] = MLP(net_sizes, gain, activate, None, self.params[view], self.grads[view])
+            offset += size
+        self.log_std = self.params[offset:]
+        self.grad_log_std = self.grads[offset:]
+        if rng is not None:
+            for name, _, gain, _ in specs:
+                self.nets[name].init(rng, gain, SQRT2, orthogonal_init)
+            self.log_std[...] = log_std_init
+
+    # forward and backward over a batch of (normalised) observations
+
+    def forward(self, obs: np.ndarray):
+        """Return (distribution parameters (logits or mean), values V(s) of shape (n,), cache)."""
+        if self.shared:
+            features, trunk_cache = self.nets["trunk"].forward(obs)
+            out, policy_cache = self.nets["policy"].forward(features)
+            values, value_cache = self.nets["value"].forward(features)
+            return out, values[:, 0], (trunk_cache, policy_cache, value_cache)
+        out, policy_cache = self.nets["policy"].forward(obs)
+        values, value_cache = self.nets["value"].forward(obs)
+        return out, values[:, 0], (None, policy_cache, value_cache)
+
+    def backward(self, cache, grad_out: np.ndarray, grad_values: np.ndarray, grad_log_std=None) -> None:
+        """Fill ``self.grads`` with dL/dθ, given dL/d(distribution parameters), dL/dV and dL/d log σ."""
+        trunk_cache, policy_cache, value_cache = cache
+        grad_features = self.nets["policy"].backward(policy_cache, grad_out, need_grad_input=self.shared)
+        grad_from_value = self.nets["value"].backward(value_cache, grad_values[:, None], need_grad_input=self.shared)
+        if self.shared:  # both heads read the trunk's features, so their gradients add up there
+            self.nets["trunk"].backward(trunk_cache, grad_features + grad_from_value)
+        if self.kind == "continuous":
+            self.grad_log_std[...] = 0.0 if grad_log_std is None else grad_log_std
+
+    def distribution(self, out: np.ndarray):
+        return Categorical(out) if self.kind == "discrete" else DiagGaussian(out, self.log_std)
+
+    def policy_output(self, obs: np.ndarray) -> np.ndarray:
+        """Logits or mean only, for acting (the rollout's hot path: no cache, no value)."""
+        if self.shared:
+            return self.nets["policy"](self.nets["trunk"](obs))
+        return self.nets["policy"](obs)
+
+    def value(self, obs: np.ndarray) -> np.ndarray:
+        features = self.nets["trunk"](obs) if self.shared else obs
+        return self.nets["value"](features)[:, 0]
+
+    def meta(self) -> dict:
+        return {
+            "obs_dim": self.obs_dim,
+            "kind": self.kind,
+            "act_dim": self.act_dim,
+            "hidden_sizes": list(self.hidden_sizes),
+            "shared": self.shared,
+        }
+
+
+def save_policy(path, agent: ActorCritic, obs_normalizer, extra: dict | None = None) -> None:
+    """Write the weights and the observation statistics to ``path`` (.npz), atomically."""
+    meta = {
+        **agent.meta(),
+        **(extra or {}),
+        "normalize_observations": obs_normalizer.enabled,
+        "obs_clip": obs_normalizer.clip,
+    }
+    tmp = f"{path}.tmp.npz"
+    np.savez(tmp, params=agent.params, meta=np.array(json.dumps(meta)), **obs_normalizer.stats.state("obs"))
+    os.replace(tmp, path)
+
+
+def load_policy(path):
+    """Return (agent, obs_normalizer, meta) from a policy.npz, or raise a one-line MinippoError."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            stored = {key: data[key] for key in data.files}
+        meta = json.loads(str(stored["meta"]))
+        agent = ActorCritic(meta["obs_dim"], meta["kind"], meta["act_dim"], meta["hidden_sizes"], meta["shared"])
+        if stored["params"].shape != agent.params.shape:
+            raise ValueError("weights of the wrong size")
+        agent.params[...] = stored["params"]
+        normalizer = ObservationNormalizer((meta["obs_dim"],), meta["obs_clip"], meta["normalize_observations"])
+        normalizer.stats.load(stored, "obs")
+        normalizer.refresh()
+    except FileNotFoundError:
+        raise MinippoError(f"no policy at {path}")
+    except (OSError, ValueError, KeyError, zipfile.BadZipFile, json.JSONDecodeError, EOFError) as error:
+        raise MinippoError(f"cannot read the policy {path}: it is corrupted or not a minippo policy ({error})")
+    if not np.all(np.isfinite(agent.params)):
+        raise MinippoError(f"the policy {path} holds NaN or infinite weights")
+    return agent, normalizer, meta

@@ -1,0 +1,108 @@
+"""The two policy distributions, each with its log-probability, entropy and KL, and their hand-derived gradients.
+
+Every forward quantity has a ``*_backward`` next to it that takes dL/d(quantity), one value per sample, and returns
+dL/d(parameters of the distribution). The parameters are the logits (categorical) or the mean and the
+state-independent log standard deviation (diagonal Gaussian).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+LOG_2PI = float(np.log(2.0 * np.pi))
+
+
+class Categorical:
+    """π(a|s) = softmax(z)_a for a batch of logits z of shape (n, k), for discrete action spaces."""
+
+    def __init__(self, logits: np.ndarray):
+        self.logits = logits
+        shifted = logits - logits.max(axis=-1, keepdims=True)
+        self.log_probs = shifted - np.log(np.exp(shifted).sum(axis=-1, keepdims=True))
+        self.probs = np.exp(self.log_probs)
+
+    def sample(self, rng: np.random.Generator) -> np.ndarray:
+        u = rng.random((self.probs.shape[0], 1))
+        cumulative = np.cumsum(self.probs, axis=-1)
+        return np.minimum((u > cumulative).sum(axis=-1), self.probs.shape[-1] - 1)
+
+    def mode(self) -> np.ndarray:
+        return self.logits.argmax(axis=-1)
+
+    def log_prob(self, actions: np.ndarray) -> np.ndarray:
+        """log π(a|s) = z_a − log Σ_j exp z_j."""
+        return np.take_along_axis(self.log_probs, actions.astype(np.int64)[:, None], axis=-1)[:, 0]
+
+    def log_prob_backward(self, actions: np.ndarray, grad_logp: np.ndarray):
+        """∂ log π(a|s) / ∂z_j = 1[j = a] − π_j, scaled by dL/dlog π."""
+        grad = -self.probs * grad_logp[:, None]
+        grad[np.arange(len(actions)), actions.astype(np.int64)] += grad_logp
+        return (grad,)
+
+    def entropy(self) -> np.ndarray:
+        """S = −Σ_j π_j log π_j."""
+        return -(self.probs * self.log_probs).sum(axis=-1)
+
+    def entropy_backward(self, grad_entropy: np.ndarray):
+        """∂S/∂z_j = −π_j (log π_j + S)."""
+        entropy = self.entropy()
+        return (-self.probs * (self.log_probs + entropy[:, None]) * grad_entropy[:, None],)
+
+    def kl(self, other: Categorical) -> np.ndarray:
+        """KL[other ‖ self] = Σ_j π'_j (log π'_j − log π_j), with ``other`` the old policy π' (eq. 8's order)."""
+        return (other.probs * (other.log_probs - self.log_probs)).sum(axis=-1)
+
+    def kl_backward(self, other: Categorical, grad_kl: np.ndarray):
+        """∂KL[π' ‖ π]/∂z_j = π_j − π'_j: only this (the new) policy's logits get a gradient."""
+        return ((self.probs - other.probs) * grad_kl[:, None],)
+
+
+class DiagGaussian:
+    """π(a|s) = N(a; μ(s), diag σ²) with log σ a free vector shared by all states, for continuous actions."""
+
+    def __init__(self, mean: np.ndarray, log_std: np.ndarray):
+        self.mean = mean
+        self.log_std = log_std
+        self.std = np.exp(log_std)
+
+    def sample(self, rng: np.random.Generator) -> np.ndarray:
+        return self.mean + self.std * rng.standard_normal(self.mean.shape)
+
+    def mode(self) -> np.ndarray:
+        return self.mean
+
+    def log_prob(self, actions: np.ndarray) -> np.ndarray:
+        """log π(a|s) = −½ Σ_i ((a_i − μ_i)/σ_i)² − Σ_i log σ_i − (k/2) log 2π."""
+        z = (actions - self.mean) / self.std
+        return -0.5 * (z * z).sum(axis=-1) - self.log_std.sum() - 0.5 * self.mean.shape[-1] * LOG_2PI
+
+    def log_prob_backward(self, actions: np.ndarray, grad_logp: np.ndarray):
+        """∂ log π/∂μ_i = (a_i − μ_i)/σ_i²;  ∂ log π/∂ log σ_i = ((a_i − μ_i)/σ_i)² − 1 (summed over the batch)."""
+        z = (actions - self.mean) / self.std
+        grad_mean = (z / self.std) * grad_logp[:, None]
+        grad_log_std = ((z * z - 1.0) * grad_logp[:, None]).sum(axis=0)
+        return grad_mean, grad_log_std
+
+    def entropy(self) -> np.ndarray:
+        """S = Σ_i (log σ_i + ½ log 2πe), the same for every state."""
+        value = float(self.log_std.sum() + 0.5 * self.mean.shape[-1] * (LOG_2PI + 1.0))
+        return np.full(self.mean.shape[0], value)
+
+    def entropy_backward(self, grad_entropy: np.ndarray):
+        """∂S/∂μ = 0;  ∂S/∂ log σ_i = 1."""
+        return np.zeros_like(self.mean), np.full(self.log_std.shape, grad_entropy.sum())
+
+    def kl(self, other: DiagGaussian) -> np.ndarray:
+        """KL[other ‖ self] = Σ_i log σ_i/σ'_i + (σ'_i² + (μ'_i − μ_i)²) / (2σ_i²) − ½, ``other`` the old policy."""
+        var = self.std**2
+        return (self.log_std - other.log_std + (other.std**2 + (other.mean - self.mean) ** 2) / (2.0 * var) - 0.5).sum(
+            axis=-1
+        )
+
+    def kl_backward(self, other: DiagGaussian, grad_kl: np.ndarray):
+        """∂KL/∂μ_i = (μ_i − μ'_i)/σ_i²;  ∂KL/∂ log σ_i = 1 − (σ'_i² + (μ'_i − μ_i)²)/σ_i²."""
+        var = self.std**2
+        diff = self.mean - other.mean
+        grad_mean = diff / var * grad_kl[:, None]
+        grad_log_std = ((1.0 - (other.std**2 + diff**2) / var) * grad_kl[:, None]).sum(axis=0)
+        return grad_mean, grad_log_std

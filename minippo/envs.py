@@ -1,0 +1,56 @@
+"""Making Gymnasium environments, and refusing the ones minippo cannot handle with a clear message."""
+
+from __future__ import annotations
+
+import difflib
+import os
+
+import gymnasium as gym
+import numpy as np
+
+from minippo.errors import MinippoError
+
+os.environ.setdefault("MUJOCO_GL", "egl")  # offscreen rendering for --gif, on machines without a display
+
+
+def check_env_id(env_id: str) -> None:
+    if env_id in gym.registry:
+        return
+    close = difflib.get_close_matches(env_id, list(gym.registry), n=3, cutoff=0.5)
+    hint = f"; did you mean {', '.join(close)}?" if close else "; see gymnasium.registry for the ids"
+    raise MinippoError(f"unknown environment id '{env_id}'{hint}")
+
+
+def spaces_of(env: gym.Env) -> tuple[int, str, int]:
+    """Return (observation size, 'discrete' or 'continuous', number of actions or action size)."""
+    obs_space, action_space = env.observation_space, env.action_space
+    if not (isinstance(obs_space, gym.spaces.Box) and len(obs_space.shape) == 1):
+        raise MinippoError(
+            f"unsupported observation space {type(obs_space).__name__}{getattr(obs_space, 'shape', '')}: "
+            "minippo handles flat Box observations only"
+        )
+    if isinstance(action_space, gym.spaces.Discrete):
+        return obs_space.shape[0], "discrete", int(action_space.n)
+    if isinstance(action_space, gym.spaces.Box) and len(action_space.shape) == 1:
+        return obs_space.shape[0], "continuous", action_space.shape[0]
+    raise MinippoError(
+        f"unsupported action space {type(action_space).__name__}: minippo handles Discrete and flat Box actions"
+    )
+
+
+def make_env(env_id: str, render_mode: str | None = None) -> gym.Env:
+    check_env_id(env_id)
+    try:
+        env = gym.make(env_id, render_mode=render_mode, disable_env_checker=True)
+    except Exception as error:  # a missing extra (e.g. mujoco) or a broken registration
+        reason = str(error).splitlines()[0] if str(error) else type(error).__name__
+        raise MinippoError(f"cannot make '{env_id}': {reason}")
+    spaces_of(env)
+    return env
+
+
+def action_bounds(env: gym.Env):
+    space = env.action_space
+    if isinstance(space, gym.spaces.Box):
+        return space.low.astype(np.float64), space.high.astype(np.float64)
+    return None, None

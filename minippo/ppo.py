@@ -1,0 +1,405 @@
+"""Proximal Policy Optimization, Algorithm 1 of Schulman et al. (2017), read top to bottom in ``train``.
+
+    for iteration = 1, 2, ...
+        run π_θold in N environments for T timesteps            (Rollout.collect)
+        compute advantage estimates Â_1 … Â_T                  (gae, eq. 11)
+        optimise the surrogate for K epochs, minibatches of M   (update_minibatch)
+        θ_old ← θ
+
+Every implementation detail is a named field of ``Config``, on by default where the "37 details" put it, and
+each can be switched off to see what it does.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from minippo import advantages as adv
+from minippo import losses
+from minippo.agent import ActorCritic, save_policy
+from minippo.envs import make_env, spaces_of
+from minippo.errors import MinippoError, NonFiniteError
+from minippo.normalization import ObservationNormalizer, RewardScaler
+from minippo.optimizer import Adam, clip_grad_norm, linear_schedule
+from minippo.rollout import Rollout
+
+OBJECTIVES = ("clip", "cpi", "klpen", "pg")
+PROGRESS_FIELDS = [
+    "update",
+    "step",
+    "episodes",
+    "return_mean",
+    "length_mean",
+    "approx_kl",
+    "clip_fraction",
+    "entropy",
+    "policy_objective",
+    "value_loss",
+    "explained_variance",
+    "kl_beta",
+    "lr",
+    "steps_per_s",
+    "wall_s",
+]
+
+
+@dataclass
+class Config:
+    """Defaults are the paper's MuJoCo settings (Table 3) and the "37 details" (Huang et al. 2022)."""
+
+    env_id: str = "Hopper-v5"
+    total_steps: int = 1_000_000
+    seed: int = 1
+    objective: str = "clip"  # clip (eq. 7) | cpi (eq. 6, no clipping or penalty) | klpen (eq. 8) | pg (eq. 2)
+    # Algorithm 1
+    num_envs: int = 1  # N actors
+    horizon: int = 2048  # T
+    epochs: int = 10  # K
+    minibatch_size: int = 64  # M
+    gamma: float = 0.99  # γ
+    gae_lambda: float = 0.95  # λ
+    clip_epsilon: float = 0.2  # ε
+    # eq. 8: the KL penalty (objective = klpen)
+    kl_beta: float = 1.0  # β, its initial value
+    kl_target: float = 0.01  # d_targ
+    adaptive_kl: bool = True  # False: β stays fixed (Table 1's "fixed KL" rows)
+    # eq. 9: one objective for policy, value and entropy
+    value_coef: float = 0.5  # c1
+    entropy_coef: float = 0.0  # c2 (the paper uses none for MuJoCo)
+    shared_network: bool = False  # one tanh trunk, a policy head and a value head
+    hidden_sizes: tuple = (64, 64)
+    log_std_init: float = 0.0
+    # the implementation details, each a switch
+    lr: float = 3e-4
+    adam_eps: float = 1e-5
+    anneal_lr: bool = True
+    use_gae: bool = True  # False: Â = discounted return − V (λ = 1)
+    shuffle_minibatches: bool = True
+    normalize_advantages: bool = True  # per minibatch
+    clip_value_loss: bool = True
+    grad_norm_clipping: bool = True
+    max_grad_norm: float = 0.5
+    orthogonal_init: bool = True
+    normalize_observations: bool = True
+    obs_clip: float = 10.0
+    scale_rewards: bool = True
+    reward_clip: float = 10.0
+    clip_actions: bool = True  # clip to the action bounds when stepping; the unclipped action is stored
+    target_kl: float | None = None  # stop the epochs early once approx KL exceeds this (off in the paper)
+    checkpoint_every: int = 10  # updates between checkpoints (for --resume and for NaN recovery)
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def batch_size(self) -> int:
+        return self.num_envs * self.horizon
+
+    @property
+    def num_updates(self) -> int:
+        return max(1, self.total_steps // self.batch_size)
+
+    def validate(self) -> Config:
+        if self.objective not in OBJECTIVES:
+            raise MinippoError(f"unknown objective '{self.objective}'; choose one of {', '.join(OBJECTIVES)}")
+        if not 0 < self.total_steps <= 10**10:
+            raise MinippoError(f"--steps must be between 1 and 10^10, not {self.total_steps}")
+        for name in ("num_envs", "horizon", "epochs", "minibatch_size"):
+            if getattr(self, name) < 1:
+                raise MinippoError(f"{name} must be a positive integer, not {getattr(self, name)}")
+        if self.minibatch_size > self.batch_size:
+            raise MinippoError(f"minibatch_size {self.minibatch_size} exceeds the batch N·T = {self.batch_size}")
+        if not (0 <= self.gamma <= 1 and 0 <= self.gae_lambda <= 1):
+            raise MinippoError("gamma and gae_lambda must lie in [0, 1]")
+        if not self.clip_epsilon > 0 or not self.lr > 0:
+            raise MinippoError("clip_epsilon and lr must be positive")
+        return self
+
+    def to_dict(self) -> dict:
+        data = dataclasses.asdict(self)
+        data["hidden_sizes"] = list(self.hidden_sizes)
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict) -> Config:
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = set(data) - known
+        if unknown:
+            raise MinippoError(f"unknown config field(s): {', '.join(sorted(unknown))}")
+        data = dict(data)
+        if "hidden_sizes" in data:
+            data["hidden_sizes"] = tuple(data["hidden_sizes"])
+        return cls(**data)
+
+
+def compute_advantages(batch, config: Config):
+    """Â_t by truncated GAE (eq. 11), and the value targets V^targ_t = Â_t + V(s_t)."""
+    if config.use_gae:
+        advantages = adv.gae(
+            batch.rewards,
+            batch.values,
+            batch.next_values,
+            batch.terminated,
+            batch.truncated,
+            config.gamma,
+            config.gae_lambda,
+        )
+        return advantages, advantages + batch.values
+    returns = adv.discounted_returns(batch.rewards, batch.next_values, batch.terminated, batch.truncated, config.gamma)
+    return returns - batch.values, returns
+
+
+def loss_and_grad(agent: ActorCritic, mb: dict, config: Config, kl_beta: float = 1.0):
+    """The loss we minimise on one minibatch, −(L^surrogate − c1 L^VF + c2 S) (eq. 9), with its gradient written
+    into ``agent.grads``. Returns (loss, statistics)."""
+    out, values, cache = agent.forward(mb["obs"])
+    dist = agent.distribution(out)
+    logp = dist.log_prob(mb["actions"])
+    advantages = mb["advantages"]
+    if config.normalize_advantages and len(advantages) > 1:
+        advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
+
+    grad_kl = None
+    if config.objective == "clip":
+        objective, grad_logp = losses.clip_objective(logp, mb["logp"], advantages, config.clip_epsilon)
+    elif config.objective == "cpi":
+        objective, grad_logp = losses.cpi_objective(logp, mb["logp"], advantages)
+    elif config.objective == "pg":
+        objective, grad_logp = losses.pg_objective(logp, advantages)
+    else:
+        old = agent.distribution(mb["policy_out"])
+        objective, grad_logp, grad_kl = losses.kl_penalty_objective(logp, mb["logp"], advantages, dist.kl(old), kl_beta)
+    value_clip = config.clip_epsilon if config.clip_value_loss else None
+    value_loss, grad_values = losses.value_loss(values, mb["returns"], mb["values"], value_clip)
+    entropy = 0.0
+    loss = -objective + config.value_coef * value_loss
+
+    # carry −∂L/∂(log π, KL, S) back through the distribution, then through the networks
+    grads = dist.log_prob_backward(mb["actions"], -grad_logp)
+    if grad_kl is not None:
+        grads = [g + k for g, k in zip(grads, dist.kl_backward(old, -grad_kl))]
+    if config.entropy_coef:
+        entropy, grad_entropy = losses.entropy_bonus(dist.entropy())
+        loss -= config.entropy_coef * entropy
+        grads = [g + e for g, e in zip(grads, dist.entropy_backward(-config.entropy_coef * grad_entropy))]
+    agent.backward(cache, grads[0], config.value_coef * grad_values, grads[1] if len(grads) > 1 else None)
+    return loss, {
+        "policy_objective": objective,
+        "value_loss": value_loss,
+        "entropy": entropy,
+        "approx_kl": losses.approx_kl(logp, mb["logp"]),
+    }
+
+
+def update_minibatch(agent: ActorCritic, optimizer: Adam, mb: dict, config: Config, kl_beta: float = 1.0) -> dict:
+    """One Adam step on one minibatch, after the global gradient-norm clip."""
+    loss, stats = loss_and_grad(agent, mb, config, kl_beta)
+    if config.grad_norm_clipping:
+        norm = clip_grad_norm(agent.grads, config.max_grad_norm)
+    else:
+        norm = float(np.sqrt(agent.grads @ agent.grads))
+    if not (np.isfinite(norm) and np.isfinite(loss)):
+        raise NonFiniteError("non-finite loss or gradient")
+    optimizer.step(agent.grads)
+    return stats
+
+
+def flatten(batch, advantages, returns) -> dict:
+    T, N = batch.values.shape
+    actions = batch.actions.reshape(T * N, *batch.actions.shape[2:])
+    return {
+        "obs": batch.obs.reshape(T * N, -1),
+        "actions": actions,
+        "logp": batch.logp.reshape(-1),
+        "policy_out": batch.policy_out.reshape(T * N, -1),
+        "values": batch.values.reshape(-1),
+        "advantages": advantages.reshape(-1),
+        "returns": returns.reshape(-1),
+    }
+
+
+class Trainer:
+    """Holds everything a run needs, so that it can be checkpointed and resumed."""
+
+    def __init__(self, config: Config):
+        self.config = config.validate()
+        self.rng = np.random.default_rng(config.seed)
+        self.envs = [make_env(config.env_id) for _ in range(config.num_envs)]
+        obs_dim, kind, act_dim = spaces_of(self.envs[0])
+        self.agent = ActorCritic(
+            obs_dim,
+            kind,
+            act_dim,
+            config.hidden_sizes,
+            config.shared_network,
+            config.log_std_init,
+            config.orthogonal_init,
+            self.rng,
+        )
+        self.optimizer = Adam(self.agent.params, lr=config.lr, eps=config.adam_eps)
+        self.obs_normalizer = ObservationNormalizer((obs_dim,), config.obs_clip, config.normalize_observations)
+        self.reward_scaler = RewardScaler(config.gamma, config.reward_clip, config.scale_rewards, config.num_envs)
+        self.rollout = Rollout(
+            self.envs,
+            self.agent,
+            self.obs_normalizer,
+            self.reward_scaler,
+            config.horizon,
+            self.rng,
+            config.seed,
+            config.clip_actions,
+        )
+        self.kl_beta = config.kl_beta
+        self.update = 0
+        self.wall_s = 0.0
+
+    def run_update(self) -> dict:
+        """One iteration of Algorithm 1."""
+        config, agent = self.config, self.agent
+        started = time.perf_counter()
+        self.update += 1
+        lr = linear_schedule(config.lr, self.update, config.num_updates) if config.anneal_lr else config.lr
+        self.optimizer.lr = lr
+
+        batch = self.rollout.collect()  # run π_θold for T timesteps
+        advantages, returns = compute_advantages(batch, config)  # Â_1 … Â_T
+        data = flatten(batch, advantages, returns)
+        n = len(data["logp"])
+
+        stats = []  # optimise the surrogate for K epochs with minibatches of M
+        for epoch in range(config.epochs):
+            order = self.rng.permutation(n) if config.shuffle_minibatches else np.arange(n)
+            epoch_kl = []
+            for start in range(0, n, config.minibatch_size):
+                index = order[start : start + config.minibatch_size]
+                minibatch = {key: value[index] for key, value in data.items()}
+                try:
+                    step = update_minibatch(agent, self.optimizer, minibatch, config, self.kl_beta)
+                except NonFiniteError as error:
+                    raise NonFiniteError(
+                        f"{error} at update {self.update}, epoch {epoch + 1}, "
+                        f"minibatch {start // config.minibatch_size + 1}"
+                    ) from None
+                stats.append(step)
+                epoch_kl.append(step["approx_kl"])
+            if config.target_kl is not None and np.mean(epoch_kl) > config.target_kl:
+                break
+
+        # how far θ moved from θ_old over the whole batch; eq. 8 adapts β from it
+        out, _, _ = agent.forward(data["obs"])
+        dist = agent.distribution(out)
+        logp = dist.log_prob(data["actions"])
+        kl = float(np.mean(dist.kl(agent.distribution(data["policy_out"]))))
+        if config.objective == "klpen" and config.adaptive_kl:
+            self.kl_beta = losses.adaptive_beta(self.kl_beta, kl, config.kl_target)
+        self.wall_s += time.perf_counter() - started
+
+        recent = self.rollout.completed_returns[-100:]
+        recent_lengths = self.rollout.completed_lengths[-100:]
+        return {
+            "update": self.update,
+            "step": self.rollout.steps,
+            "episodes": len(self.rollout.completed_returns),
+            "return_mean": float(np.mean(recent)) if recent else float("nan"),
+            "length_mean": float(np.mean(recent_lengths)) if recent_lengths else float("nan"),
+            "approx_kl": losses.approx_kl(logp, data["logp"]),
+            "clip_fraction": losses.clip_fraction(logp, data["logp"], config.clip_epsilon),
+            "entropy": float(np.mean(dist.entropy())),
+            "policy_objective": float(np.mean([s["policy_objective"] for s in stats])),
+            "value_loss": float(np.mean([s["value_loss"] for s in stats])),
+            "explained_variance": losses.explained_variance(data["values"], data["returns"]),
+            "kl_beta": self.kl_beta,
+            "lr": lr,
+            "steps_per_s": self.rollout.steps / self.wall_s,
+            "wall_s": self.wall_s,
+        }
+
+    # checkpoints: everything needed to carry on
+
+    def state(self) -> dict:
+        state = {
+            "params": self.agent.params.copy(),
+            "update": np.array(self.update),
+            "steps": np.array(self.rollout.steps),
+            "wall_s": np.array(self.wall_s),
+            "kl_beta": np.array(self.kl_beta),
+            "returns": np.array(self.rollout.completed_returns),
+            "lengths": np.array(self.rollout.completed_lengths),
+            "rng": np.array(json.dumps(self.rng.bit_generator.state)),
+            "reward_discounted": self.reward_scaler.discounted,
+            **{f"adam_{k}": v for k, v in self.optimizer.state_dict().items()},
+            **self.obs_normalizer.stats.state("obs"),
+            **self.reward_scaler.stats.state("ret"),
+        }
+        return state
+
+    def load_state(self, state: dict) -> None:
+        self.agent.params[...] = state["params"]
+        self.update = int(state["update"])
+        self.rollout.steps = int(state["steps"])
+        self.wall_s = float(state["wall_s"])
+        self.kl_beta = float(state["kl_beta"])
+        self.rollout.completed_returns = [float(x) for x in state["returns"]]
+        self.rollout.completed_lengths = [int(x) for x in state["lengths"]]
+        self.rng.bit_generator.state = json.loads(str(state["rng"]))
+        self.reward_scaler.discounted = np.array(state["reward_discounted"], dtype=np.float64)
+        self.optimizer.load_state_dict({k[5:]: v for k, v in state.items() if k.startswith("adam_")})
+        self.obs_normalizer.stats.load(state, "obs")
+        self.obs_normalizer.refresh()
+        self.reward_scaler.stats.load(state, "ret")
+        # the environments restart from fresh episodes, seeded from the update count
+        for i, env in enumerate(self.envs):
+            self.rollout.raw_obs[i] = env.reset(seed=self.config.seed + 10_000 * self.update + i)[0]
+
+    def save_checkpoint(self, out: Path) -> None:
+        tmp = out / "checkpoint.tmp.npz"
+        np.savez(tmp, **self.state())
+        os.replace(tmp, out / "checkpoint.npz")
+        save_policy(
+            out / "policy.npz", self.agent, self.obs_normalizer, {"env_id": self.config.env_id, "update": self.update}
+        )
+
+
+def train(config: Config, out: str | os.PathLike | None = None, resume: bool = False, on_update=None) -> list[dict]:
+    """Train PPO with ``config``; with ``out``, write config.json, progress.csv, checkpoint.npz and policy.npz there.
+
+    ``on_update(row)`` is called after every update (the command line draws its progress bar with it). Returns the
+    progress rows. On NaN/inf, raises NonFiniteError; the last checkpoint in ``out`` is left as it was.
+    """
+    trainer = Trainer(config)
+    rows: list[dict] = []
+    if out is not None:
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        progress_path = out / "progress.csv"
+        if resume and (out / "checkpoint.npz").exists():
+            with np.load(out / "checkpoint.npz", allow_pickle=False) as data:
+                trainer.load_state({key: data[key] for key in data.files})
+            with open(progress_path, newline="") as handle:
+                rows = [r for r in csv.DictReader(handle) if int(r["update"]) <= trainer.update]
+        (out / "config.json").write_text(json.dumps(config.to_dict(), indent=2) + "\n")
+        with open(progress_path, "w", newline="") as handle:
+            writer = csv.DictWriter(handle, fieldnames=PROGRESS_FIELDS)
+            writer.writeheader()
+            writer.writerows(rows)
+    while trainer.update < config.num_updates:
+        row = trainer.run_update()
+        rows.append(row)
+        if out is not None:
+            with open(progress_path, "a", newline="") as handle:
+                csv.DictWriter(handle, fieldnames=PROGRESS_FIELDS).writerow(
+                    {k: (repr(v) if isinstance(v, float) else v) for k, v in row.items()}
+                )
+            if trainer.update % config.checkpoint_every == 0 or trainer.update == config.num_updates:
+                trainer.save_checkpoint(out)
+        if on_update is not None:
+            on_update(row)
+    for env in trainer.envs:
+        env.close()
+    return rows

@@ -1,0 +1,115 @@
+"""Running the snapshot policy π_θold for T steps in N environments: Algorithm 1's inner "for actor" loop."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from minippo.errors import NonFiniteError
+
+
+@dataclass
+class Batch:
+    """T steps × N environments of experience. ``obs`` is normalised (what the policy saw); ``next_values[t]`` is
+    V of the observation that followed step t (the final observation when the episode ended there)."""
+
+    obs: np.ndarray  # (T, N, obs_dim)
+    actions: np.ndarray  # (T, N, act_dim) unclipped, or (T, N) integers
+    logp: np.ndarray  # (T, N) log π_θold(a_t|s_t)
+    policy_out: np.ndarray  # (T, N, ·) logits or means of π_θold
+    values: np.ndarray  # (T, N)
+    next_values: np.ndarray  # (T, N)
+    rewards: np.ndarray  # (T, N) scaled, as the learner sees them
+    terminated: np.ndarray  # (T, N)
+    truncated: np.ndarray  # (T, N)
+
+
+class Rollout:
+    def __init__(self, envs, agent, obs_normalizer, reward_scaler, horizon: int, rng, seed: int, clip_actions=True):
+        self.envs, self.agent, self.horizon, self.rng = envs, agent, horizon, rng
+        self.obs_normalizer, self.reward_scaler = obs_normalizer, reward_scaler
+        space = envs[0].action_space
+        self.low = getattr(space, "low", None)
+        self.high = getattr(space, "high", None)
+        self.clip_actions = clip_actions and agent.kind == "continuous"
+        self.raw_obs = np.stack([env.reset(seed=seed + i)[0] for i, env in enumerate(envs)]).astype(np.float64)
+        self.episode_return = np.zeros(len(envs))
+        self.episode_length = np.zeros(len(envs), dtype=np.int64)
+        self.completed_returns: list[float] = []
+        self.completed_lengths: list[int] = []
+        self.steps = 0
+
+    def collect(self) -> Batch:
+        T, N, agent = self.horizon, len(self.envs), self.agent
+        obs_dim = self.raw_obs.shape[1]
+        raw_obs = np.empty((T, N, obs_dim))
+        obs = np.empty((T, N, obs_dim))
+        rewards = np.empty((T, N))
+        terminated = np.zeros((T, N), dtype=bool)
+        truncated = np.zeros((T, N), dtype=bool)
+        final_obs = {}  # (t, i) -> normalised last observation of an episode cut by a time limit
+        continuous = agent.kind == "continuous"
+        if continuous:
+            actions = np.empty((T, N, agent.act_dim))
+            policy_out = np.empty((T, N, agent.act_dim))
+            noise = self.rng.standard_normal((T, N, agent.act_dim))  # drawn at once: same numbers, fewer calls
+            std = np.exp(agent.log_std)
+        else:
+            actions = np.empty((T, N), dtype=np.int64)
+            policy_out = np.empty((T, N, agent.act_dim))
+            uniforms = self.rng.random((T, N))
+
+        for t in range(T):
+            raw_obs[t] = self.raw_obs
+            obs[t] = self.obs_normalizer(self.raw_obs)
+            out = agent.policy_output(obs[t])
+            policy_out[t] = out
+            if continuous:
+                actions[t] = out + std * noise[t]
+                env_actions = np.clip(actions[t], self.low, self.high) if self.clip_actions else actions[t]
+            else:
+                probs = np.exp(out - out.max(axis=1, keepdims=True))
+                cumulative = np.cumsum(probs, axis=1)
+                actions[t] = np.minimum(
+                    (uniforms[t][:, None] * cumulative[:, -1:] > cumulative).sum(axis=1), agent.act_dim - 1
+                )
+                env_actions = actions[t]
+            for i, env in enumerate(self.envs):
+                next_obs, reward, term, trunc, _ = env.step(env_actions[i])
+                rewards[t, i] = reward
+                self.episode_return[i] += reward
+                self.episode_length[i] += 1
+                if term or trunc:
+                    terminated[t, i], truncated[t, i] = term, trunc and not term
+                    if truncated[t, i]:
+                        final_obs[(t, i)] = self._check(np.asarray(next_obs, dtype=np.float64), t)
+                    self.completed_returns.append(float(self.episode_return[i]))
+                    self.completed_lengths.append(int(self.episode_length[i]))
+                    self.episode_return[i], self.episode_length[i] = 0.0, 0
+                    next_obs, _ = env.reset()
+                self.raw_obs[i] = self._check(np.asarray(next_obs, dtype=np.float64), t)
+        self.steps += T * N
+        if not np.all(np.isfinite(rewards)):
+            raise NonFiniteError(f"non-finite reward in the rollout ending at step {self.steps}")
+
+        # V(s_t) for the batch and V(s_{t+1}) after it, with the statistics the policy acted on
+        flat_obs = obs.reshape(T * N, obs_dim)
+        values = agent.value(flat_obs).reshape(T, N)
+        next_values = np.empty((T, N))
+        next_values[:-1] = values[1:]
+        next_values[-1] = agent.value(self.obs_normalizer(self.raw_obs))
+        for (t, i), last in final_obs.items():
+            next_values[t, i] = agent.value(self.obs_normalizer(last[None]))[0]
+        dist = agent.distribution(policy_out.reshape(T * N, -1))
+        logp = dist.log_prob(actions.reshape(T * N, -1) if continuous else actions.reshape(T * N)).reshape(T, N)
+
+        # the statistics move only now, between batches (the stored obs keep the normalisation they were acted on)
+        self.obs_normalizer.update(raw_obs.reshape(T * N, obs_dim))
+        scaled = self.reward_scaler.scale(rewards, terminated | truncated)
+        return Batch(obs, actions, logp, policy_out, values, next_values, scaled, terminated, truncated)
+
+    def _check(self, observation: np.ndarray, t: int) -> np.ndarray:
+        if not np.all(np.isfinite(observation)):
+            raise NonFiniteError(f"non-finite observation from the environment at step {self.steps + t + 1}")
+        return observation
