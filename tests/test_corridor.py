@@ -120,15 +120,15 @@ def test_surrogate_gradients_match_finite_differences(rng, name):
         if name == "clip" and near_band_edge(logits, snapshot, epsilon):
             continue  # the clipped surrogate has a kink at the band's edges
 
-        def objective(theta):
+        def objective(theta=logits, snapshot=snapshot):
             if name == "cpi":
                 return cd.cpi_objective(as_lists(theta), snapshot)
             if name == "clip":
                 return cd.clip_objective(as_lists(theta), snapshot, epsilon)
             return cd.kl_penalty_objective(as_lists(theta), snapshot, beta)
 
-        _, grad = objective(logits)
-        assert_close(np.array(grad), numerical_gradient(lambda: objective(logits)[0], logits), rtol=1e-7)
+        _, grad = objective()
+        assert_close(np.array(grad), numerical_gradient(lambda f=objective: f()[0], logits), rtol=1e-7)
         if name == "clip":
             clipped_seen |= any(any(row) for row in cd.clipped_mask(cd.softmax_policy(as_lists(logits)), snapshot, 0.2))
         checked += 1
@@ -167,7 +167,7 @@ def test_cpi_gradient_at_the_snapshot_is_the_policy_gradient(rng):
         logits = random_logits(rng)
         snapshot = cd.Snapshot(as_lists(logits))
         _, grad_cpi = cd.cpi_objective(as_lists(logits), snapshot)
-        grad_v = numerical_gradient(lambda: cd.expected_return(as_lists(logits)), logits)
+        grad_v = numerical_gradient(lambda theta=logits: cd.expected_return(as_lists(theta)), logits)
         assert_close(np.array(grad_cpi), grad_v, rtol=1e-7)
         # at the snapshot nothing is clipped and the KL term has zero gradient: all three agree
         assert np.allclose(cd.clip_objective(as_lists(logits), snapshot, 0.2)[1], grad_cpi, atol=1e-15)
