@@ -76,9 +76,9 @@ def cmd_train(args) -> int:
             env_id=args.env_id, total_steps=args.steps, seed=args.seed, objective=args.objective, **overrides
         )
     config.validate()
-    from minippo.envs import check_env_id
+    from minippo.envs import make_env
 
-    check_env_id(config.env_id)
+    make_env(config.env_id).close()  # an unknown id or an unsupported space is refused before anything starts
 
     bar = None
     if not args.quiet:

@@ -26,8 +26,7 @@ def spaces_of(env: gym.Env) -> tuple[int, str, int]:
     obs_space, action_space = env.observation_space, env.action_space
     if not (isinstance(obs_space, gym.spaces.Box) and len(obs_space.shape) == 1):
         raise MinippoError(
-            f"unsupported observation space {type(obs_space).__name__}{getattr(obs_space, 'shape', '')}: "
-            "minippo handles flat Box observations only"
+            f"unsupported observation space {type(obs_space).__name__}: minippo handles flat Box observations only"
         )
     if isinstance(action_space, gym.spaces.Discrete):
         return obs_space.shape[0], "discrete", int(action_space.n)
@@ -41,7 +40,8 @@ def spaces_of(env: gym.Env) -> tuple[int, str, int]:
 def make_env(env_id: str, render_mode: str | None = None) -> gym.Env:
     check_env_id(env_id)
     try:
-        env = gym.make(env_id, render_mode=render_mode, disable_env_checker=True)
+        extra = {} if render_mode is None else {"render_mode": render_mode}
+        env = gym.make(env_id, disable_env_checker=True, **extra)
     except Exception as error:  # a missing extra (e.g. mujoco) or a broken registration
         reason = str(error).splitlines()[0] if str(error) else type(error).__name__
         raise MinippoError(f"cannot make '{env_id}': {reason}")

@@ -1,0 +1,157 @@
+"""The command line as a user meets it: real subprocesses, exit codes, one-line errors, files on disk."""
+
+import subprocess
+import sys
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from minippo.cli import main
+
+
+def run(*args, timeout=300):
+    return subprocess.run([sys.executable, "-m", "minippo", *args], capture_output=True, text=True, timeout=timeout)
+
+
+def assert_one_line_error(result, *fragments):
+    assert result.returncode != 0
+    assert "Traceback" not in result.stderr
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("minippo: error:"), result.stderr
+    for fragment in fragments:
+        assert fragment in lines[0], lines[0]
+
+
+@pytest.fixture(scope="module")
+def trained_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("runs") / "cartpole"
+    result = run(
+        "train",
+        "CartPole-v1",
+        "--steps",
+        "1024",
+        "--seed",
+        "3",
+        "--out",
+        str(out),
+        "--config",
+        "horizon=512",
+        "minibatch_size=128",
+        "epochs=2",
+    )
+    assert result.returncode == 0, result.stderr
+    return out, result
+
+
+def test_train_writes_the_run_folder(trained_run):
+    out, result = trained_run
+    for name in ("config.json", "progress.csv", "policy.npz", "checkpoint.npz", "curve.png"):
+        assert (out / name).stat().st_size > 0
+    header = (out / "progress.csv").read_text().splitlines()[0].split(",")
+    for column in (
+        "step",
+        "episodes",
+        "return_mean",
+        "approx_kl",
+        "clip_fraction",
+        "entropy",
+        "value_loss",
+        "explained_variance",
+        "lr",
+        "steps_per_s",
+        "wall_s",
+    ):
+        assert column in header
+    assert "CartPole-v1: 1024 steps" in result.stdout
+
+
+def test_eval_prints_mean_and_std(trained_run):
+    out, _ = trained_run
+    result = run("eval", str(out), "--episodes", "3")
+    assert result.returncode == 0, result.stderr
+    assert "±" in result.stdout and "over 3 episodes" in result.stdout
+
+
+def test_plot_overlays_runs(trained_run, tmp_path):
+    out, _ = trained_run
+    result = run("plot", str(out), str(out), "--out", str(tmp_path / "curves.png"))
+    assert result.returncode == 0, result.stderr
+    assert (tmp_path / "curves.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_existing_out_is_refused_and_kept(trained_run):
+    out, _ = trained_run
+    before = (out / "progress.csv").read_bytes()
+    result = run("train", "CartPole-v1", "--steps", "512", "--out", str(out))
+    assert_one_line_error(result, "exists", "--force", "--resume")
+    assert (out / "progress.csv").read_bytes() == before
+
+
+@pytest.mark.parametrize(
+    "args, fragments",
+    [
+        (["train", "Hoper-v5", "--steps", "100", "--out", "{tmp}/x"], ["unknown environment id", "Hopper-v5"]),
+        (["train", "Blackjack-v1", "--steps", "100", "--out", "{tmp}/x"], ["unsupported observation space"]),
+        (["train", "CartPole-v1", "--steps", "0", "--out", "{tmp}/x"], ["--steps"]),
+        (["train", "CartPole-v1", "--steps", "-5", "--out", "{tmp}/x"], ["--steps"]),
+        (["train", "CartPole-v1", "--steps", "99999999999999", "--out", "{tmp}/x"], ["--steps"]),
+        (["train", "CartPole-v1", "--steps", "ten", "--out", "{tmp}/x"], ["invalid int value"]),
+        (["train", "CartPole-v1", "--steps", "100", "--out", "{tmp}/x", "--config", "horizn=5"], ["horizon"]),
+        (["train", "CartPole-v1", "--steps", "100", "--out", "{tmp}/x", "--config", "epochs=many"], ["epochs"]),
+        (["train", "CartPole-v1", "--steps", "100", "--out", "{tmp}/x", "--resume"], ["no checkpoint"]),
+        (["eval", "{tmp}/nothing-here"], ["no policy"]),
+        (["eval", "{tmp}/corrupt", "--episodes", "2"], ["corrupted"]),
+        (["plot", "{tmp}/nothing-here", "--out", "{tmp}/p.png"], ["no run folder"]),
+        (["dance"], ["invalid choice"]),
+    ],
+)
+def test_bad_input_gets_one_line_and_a_nonzero_exit(tmp_path, args, fragments):
+    (tmp_path / "corrupt").mkdir()
+    (tmp_path / "corrupt" / "policy.npz").write_bytes(b"PK\x03\x04 this is not a zip archive")
+    result = run(*[a.replace("{tmp}", str(tmp_path)) for a in args])
+    assert_one_line_error(result, *fragments)
+
+
+class NaNAfter(gym.Env):
+    """CartPole-like spaces; the observation turns NaN after 1,300 steps in total."""
+
+    observation_space = gym.spaces.Box(-1, 1, (3,))
+    action_space = gym.spaces.Discrete(2)
+    steps = 0
+
+    def reset(self, seed=None, options=None):
+        super().reset(seed=seed)
+        return np.zeros(3, np.float32), {}
+
+    def step(self, action):
+        NaNAfter.steps += 1
+        value = np.nan if NaNAfter.steps > 1300 else 0.1
+        return np.full(3, value, np.float32), 1.0, NaNAfter.steps % 50 == 0, False, {}
+
+
+def test_nan_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path, capsys):
+    gym.register("NaNAfter-v0", entry_point=NaNAfter)
+    out = tmp_path / "nan"
+    code = main(
+        [
+            "train",
+            "NaNAfter-v0",
+            "--steps",
+            "5120",
+            "--out",
+            str(out),
+            "--quiet",
+            "--config",
+            "horizon=512",
+            "minibatch_size=128",
+            "epochs=1",
+            "checkpoint_every=1",
+        ]
+    )
+    err = capsys.readouterr().err.strip()
+    assert code != 0 and "non-finite observation" in err and "checkpoint is kept" in err
+    assert len(err.splitlines()) == 1
+    with np.load(out / "checkpoint.npz") as data:
+        assert int(data["update"]) == 2  # updates 1 and 2 finished before step 1301
+    assert np.all(np.isfinite(np.load(out / "policy.npz")["params"]))
