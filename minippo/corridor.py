@@ -28,8 +28,11 @@ optionally, seeded Gaussian noise that stands in for the error of estimating the
 plain gradient-ascent steps on the chosen surrogate (one tick = one epoch; the "minibatch" is the whole, exact
 batch) before θ_old ← θ. ``run(settings)`` plays it and returns the trace.
 
-Everything is plain Python floats and the ``math`` module, step for step as in the book's in-browser explorer
-(``book/_static/explorer/corridor-math.js``), so that the two agree to rounding: a test runs both.
+Everything is plain Python floats, step for step as in the book's in-browser explorer
+(``book/_static/explorer/corridor-math.js``). Even e^x, log x and cos x are computed here from + − × ÷ alone
+(``exp``, ``log``, ``cos_turns`` at the end of the module), because a browser's ``Math.exp`` and the C library's
+``exp`` may differ in the last bit and a long run with a huge step amplifies such a bit. IEEE arithmetic is the
+same everywhere, so the two implementations give the same trajectory bit for bit: a test runs both.
 """
 
 from __future__ import annotations
@@ -47,6 +50,9 @@ GAMMA = 0.97
 GOAL_REWARD = 1.0
 TRAP_REWARD = -1.0
 OBJECTIVES = ("clip", "cpi", "klpen")
+# after every step each logit is kept within ±LOGIT_BOUND, so that π(a|s) ≥ e^−50 never underflows to zero
+# (the presets stay far inside it; only extreme step sizes reach it)
+LOGIT_BOUND = 25.0
 
 # the explorer's starting settings; each preset below changes some of them
 DEFAULTS = {
@@ -82,7 +88,7 @@ def softmax_policy(logits):
     probs = []
     for row in logits:
         top = max(row)
-        exps = [math.exp(z - top) for z in row]
+        exps = [exp(z - top) for z in row]
         total = sum(exps)
         probs.append([e / total for e in exps])
     return probs
@@ -166,7 +172,10 @@ def expected_return(logits, gamma=GAMMA):
 
 def optimal_return(gamma=GAMMA):
     """Walking right five times: the goal's reward arrives on the fifth step, discounted by γ⁴."""
-    return GOAL_REWARD * gamma ** (N_STATES - 1)
+    discount = 1.0
+    for _ in range(N_STATES - 1):
+        discount *= gamma
+    return GOAL_REWARD * discount
 
 
 # ---------------------------------------------------------------- the snapshot and the surrogates
@@ -201,7 +210,7 @@ def ratios(probs, snapshot):
 def kl_per_state(snapshot, probs):
     """KL[π_old(·|s), π_θ(·|s)] = Σ_a π_old(a|s) log(π_old(a|s) / π_θ(a|s)), eq. 8's order."""
     return [
-        sum(snapshot.probs[s][a] * math.log(snapshot.probs[s][a] / probs[s][a]) for a in range(N_ACTIONS))
+        sum(snapshot.probs[s][a] * log(snapshot.probs[s][a] / probs[s][a]) for a in range(N_ACTIONS))
         for s in range(N_STATES)
     ]
 
@@ -349,7 +358,7 @@ class Noise:
         """One standard-normal draw: √(−2 log u₁) cos(2π u₂), with u₁ in (0, 1]."""
         u1 = 1.0 - self.uniform()
         u2 = self.uniform()
-        return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
+        return math.sqrt(-2.0 * log(u1)) * cos_turns(u2)
 
 
 def _imul(a, b):
@@ -437,7 +446,10 @@ class Explorer:
             self._end_round()
         _, grad = self.objective()
         step = self.settings["step_size"]
-        self.logits = [[self.logits[s][a] + step * grad[s][a] for a in range(N_ACTIONS)] for s in range(N_STATES)]
+        self.logits = [
+            [min(max(self.logits[s][a] + step * grad[s][a], -LOGIT_BOUND), LOGIT_BOUND) for a in range(N_ACTIONS)]
+            for s in range(N_STATES)
+        ]
         self.epoch += 1
         self.tick_count += 1
         return self.record()
@@ -494,3 +506,74 @@ def run(settings=None, ticks=200, changes=None):
             explorer.set(key, value)
         trace.append(explorer.tick())
     return trace
+
+
+# ---------------------------------------------------------------- e^x, log x and cos x from + − × ÷ alone
+# Each is a textbook range reduction and a short series; IEEE-754 rounds + − × ÷ (and √) the same way in every
+# language, so these give the same bits in Python and in JavaScript. Accurate to about one unit in the last place.
+
+LN2_HI = 6.93147180369123816490e-01  # ln 2 split in two: LN2_HI has zero low bits, so k × LN2_HI is exact
+LN2_LO = 1.90821492927058770002e-10
+INV_LN2 = 1.44269504088896338700e00
+SQRT_HALF = 0.70710678118654752440
+HALF_PI = 1.57079632679489661923
+
+
+def exp(x):
+    """e^x = 2^k e^r with k = round(x / ln 2) and |r| ≤ ½ ln 2, e^r by its Taylor series to r¹⁴/14!."""
+    if x < -708.0:
+        return 0.0
+    k = math.floor(x * INV_LN2 + 0.5)
+    r = (x - k * LN2_HI) - k * LN2_LO
+    series = 1.0
+    for n in range(14, 0, -1):
+        series = 1.0 + series * r / n
+    return math.ldexp(series, k)  # exact: a power of two (the JavaScript port multiplies by 2 or ½ k times)
+
+
+def log(x):
+    """log x = e ln 2 + log m with x = m 2^e, m in [√½, √2), and log m = 2 atanh(s), s = (m − 1)/(m + 1)."""
+    m, e = math.frexp(x)
+    if m < SQRT_HALF:
+        m *= 2.0
+        e -= 1
+    s = (m - 1.0) / (m + 1.0)
+    s2 = s * s
+    series = 1.0 / 21.0
+    for n in range(19, 0, -2):  # 2 atanh s = 2 (s + s³/3 + s⁵/5 + … + s²¹/21)
+        series = 1.0 / n + s2 * series
+    return e * LN2_HI + (e * LN2_LO + 2.0 * s * series)
+
+
+def _cos_quarter(f):
+    """cos(f π/2) for f in [0, 1], by its Taylor series to (f π/2)²⁴/24!."""
+    a = f * HALF_PI
+    a2 = a * a
+    series = 1.0
+    for k in range(12, 0, -1):
+        series = 1.0 - a2 * series / ((2 * k - 1) * (2 * k))
+    return series
+
+
+def _sin_quarter(f):
+    """sin(f π/2) for f in [0, 1], by its Taylor series to (f π/2)²⁵/25!."""
+    a = f * HALF_PI
+    a2 = a * a
+    series = 1.0
+    for k in range(12, 0, -1):
+        series = 1.0 - a2 * series / ((2 * k) * (2 * k + 1))
+    return a * series
+
+
+def cos_turns(u):
+    """cos(2π u) for u in [0, 1): the quarter turn q = ⌊4u⌋ picks ±cos or ±sin of the rest, f π/2."""
+    quarter = u * 4.0
+    q = math.floor(quarter)
+    f = quarter - q
+    if q == 0:
+        return _cos_quarter(f)
+    if q == 1:
+        return -_sin_quarter(f)
+    if q == 2:
+        return -_cos_quarter(f)
+    return _sin_quarter(f)

@@ -286,3 +286,22 @@ def test_epsilon_moves_the_band_and_the_limit():
 def test_bad_settings_get_a_clear_error(settings, message):
     with pytest.raises(MinippoError, match=message):
         cd.run(settings, ticks=1)
+
+
+def test_portable_exp_log_cos_match_the_math_module(rng):
+    for x in rng.uniform(-60.0, 60.0, 5000):
+        assert math.isclose(cd.exp(x), math.exp(x), rel_tol=4e-16)
+    for x in np.exp(rng.uniform(-60.0, 60.0, 5000)):
+        assert math.isclose(cd.log(x), math.log(x), rel_tol=4e-16, abs_tol=1e-16)
+    for u in rng.random(5000):
+        assert math.isclose(cd.cos_turns(u), math.cos(2.0 * math.pi * u), abs_tol=1e-15)
+    assert cd.exp(0.0) == 1.0 and cd.log(1.0) == 0.0 and cd.cos_turns(0.0) == 1.0
+    assert cd.exp(-800.0) == 0.0
+
+
+def test_extreme_settings_stay_finite():
+    for objective in cd.OBJECTIVES:
+        trace = cd.run({"objective": objective, "step_size": 100.0, "noise": 1.0, "epochs": 100, "seed": 5}, 400)
+        for record in trace:
+            assert all(abs(z) <= cd.LOGIT_BOUND for row in record["logits"] for z in row)
+            assert all(math.isfinite(record[key]) for key in ("kl", "return", "surrogate"))
