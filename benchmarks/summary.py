@@ -1,0 +1,317 @@
+"""Turn the benchmark records into benchmarks/results/summary.md and its figures.
+
+    python benchmarks/summary.py                 # summary.md, mujoco_curves.png, table1.png
+    python benchmarks/summary.py --table-only    # print only the seven-task table (the README's)
+
+Reads only committed records: results/mujoco.csv and the run folders' progress.csv (learning curves),
+results/table1.csv and results/random.csv, results/speed.csv. Nothing in the output is typed in except the
+paper's and CleanRL's reference numbers below, quoted with their sources.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import statistics
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import records  # noqa: E402
+from seven_tasks import TASKS  # noqa: E402
+
+# Figure 3 of Schulman et al. (2017), PPO (clip) at 1M steps, as read off the plot by third parties (approximate);
+# (low, high) of the read-off range. "At or above the paper" compares a mean with the low end.
+PAPER = {
+    "HalfCheetah-v5": (1800, 1800),
+    "Hopper-v5": (2200, 2300),
+    "InvertedDoublePendulum-v5": (8000, 8000),
+    "InvertedPendulum-v5": (1000, 1000),
+    "Reacher-v5": (-8, -5),
+    "Swimmer-v5": (110, 110),
+    "Walker2d-v5": (3000, 3400),
+}
+# CleanRL ppo_continuous_action.py, MuJoCo v4, 1M steps, 3 seeds (mean ± std), from its published benchmark
+CLEANRL = {
+    "HalfCheetah-v5": "1442 ± 46",
+    "Hopper-v5": "2383 ± 272",
+    "Walker2d-v5": "2288 ± 572",
+    "InvertedPendulum-v5": "963 ± 22",
+}
+SOURCES = (
+    "Paper: Schulman et al. (2017), Figure 3, PPO (clip) at 1M steps on the v1 tasks of 2017, values read off the "
+    "plot (approximate; a range where readings differ). CleanRL: `ppo_continuous_action.py`, MuJoCo v4, 1M steps, "
+    "3 seeds, from CleanRL's published benchmark. Gymnasium's v5 tasks differ slightly from v4 (Hopper and Walker2d "
+    "pay the healthy reward only while healthy); HalfCheetah and Swimmer are unchanged."
+)
+SPEED_NAMES = {
+    "raw": "raw env stepping, random actions",
+    "minippo": "minippo PPO (NumPy)",
+    "sb3": "Stable-Baselines3 PPO (PyTorch)",
+}
+
+
+def paper_text(env_id: str) -> str:
+    low, high = PAPER[env_id]
+    return f"~{low}" if low == high else f"~{low} to {high}" if low >= 0 else f"~{low} ({low} to {high})"
+
+
+def task_stats(rows: list[dict]) -> dict[str, dict]:
+    """Per task: the seeds' final returns, their mean and sample standard deviation, mean steps/s and wall time."""
+    grouped: dict[str, list[dict]] = {}
+    for row in rows:
+        grouped.setdefault(row["env"], []).append(row)
+    stats = {}
+    for env_id, runs in grouped.items():
+        runs = sorted(runs, key=lambda row: int(row["seed"]))
+        returns = [float(row["return_mean"]) for row in runs]
+        stats[env_id] = {
+            "seeds": [int(row["seed"]) for row in runs],
+            "returns": returns,
+            "mean": statistics.fmean(returns),
+            "std": statistics.stdev(returns) if len(returns) > 1 else 0.0,
+            "steps": sorted({int(row["steps"]) for row in runs}),
+            "steps_per_s": statistics.fmean(float(row["steps_per_s"]) for row in runs),
+            "wall_min": statistics.fmean(float(row["wall_s"]) for row in runs) / 60,
+        }
+    return stats
+
+
+def at_or_above(env_id: str, mean: float) -> bool:
+    return mean >= PAPER[env_id][0]
+
+
+def mujoco_table(stats: dict[str, dict]) -> list[str]:
+    lines = [
+        "| Task (Gymnasium v5) | minippo, mean ± std over seeds | seeds | paper (Fig. 3) | CleanRL (v4) "
+        "| at or above paper | steps/s | minutes per run |",
+        "|---|---:|---|---:|---:|:---:|---:|---:|",
+    ]
+    for env_id in TASKS:
+        if env_id not in stats:
+            lines.append(f"| {env_id} | not run yet | | {paper_text(env_id)} | {CLEANRL.get(env_id, '—')} | | | |")
+            continue
+        s = stats[env_id]
+        seeds = ", ".join(f"{value:.0f}" for value in s["returns"])
+        mark = "yes" if at_or_above(env_id, s["mean"]) else "no"
+        lines.append(
+            f"| {env_id} | {s['mean']:.1f} ± {s['std']:.1f} (n = {len(s['returns'])}) | {seeds} | {paper_text(env_id)} "
+            f"| {CLEANRL.get(env_id, '—')} | {mark} | {s['steps_per_s']:.0f} | {s['wall_min']:.1f} |"
+        )
+    return lines
+
+
+def mujoco_verdict(stats: dict[str, dict]) -> str:
+    complete = [env_id for env_id in TASKS if env_id in stats and len(stats[env_id]["returns"]) >= 3]
+    above = [env_id for env_id in complete if at_or_above(env_id, stats[env_id]["mean"])]
+    steps = sorted({step for env_id in stats for step in stats[env_id]["steps"]})
+    return (
+        f"{len(complete)} of 7 tasks have 3 seeds recorded; minippo's mean is at or above the paper's value (the low "
+        f"end of the read-off range) on {len(above)} of them"
+        + (f" ({', '.join(above)})" if above else "")
+        + f". Each run is {', '.join(f'{s:,} steps ({s // 2048} updates of 2048)' for s in steps)}; its return is "
+        "the mean of its last 100 training episodes."
+    )
+
+
+def table1_lines(table: list[dict], randoms: list[dict]) -> list[str]:
+    if not table:
+        return ["No Table 1 runs are recorded yet."]
+    lines = [
+        f"Reduced scale: {table[0]['scale']}. Score: per task the random policy's mean return is 0 and the best final "
+        "return of any setting is 1; a setting's score is the mean over its runs.",
+        "",
+        "| Setting | minippo score | runs | paper (Table 1) |",
+        "|---|---:|---:|---:|",
+    ]
+    for row in table:
+        lines.append(
+            f"| {row['setting']} | {float(row['score']):.2f} | {row['runs']} | {float(row['paper_score']):.2f} |"
+        )
+    best = max(table, key=lambda row: float(row["score"]))
+    worst = min(table, key=lambda row: float(row["score"]))
+    lines += [
+        "",
+        f"Best here: {best['setting']} ({float(best['score']):.2f}); worst: {worst['setting']} "
+        f"({float(worst['score']):.2f}). In the paper: Clipping, ε = 0.2 best (0.82), no clipping worst (−0.39).",
+    ]
+    if randoms:
+        lines += [
+            "",
+            "Random policy (the zero of the score):",
+            "",
+            "| Task | episodes | mean return | std |",
+            "|---|---:|---:|---:|",
+        ]
+        for row in randoms:
+            lines.append(
+                f"| {row['env']} | {row['episodes']} | {float(row['return_mean']):.2f} | "
+                f"{float(row['return_std']):.2f} |"
+            )
+    return lines
+
+
+def speed_lines(rows: list[dict]) -> list[str]:
+    if not rows:
+        return ["The speed race has not been run yet."]
+    first = rows[0]
+    lines = [
+        f"{first['env']}, one process, {first['date']}, commit {first['commit']}, {first['machine']}; 1-minute load "
+        f"average {first['load_before']} before and {first['load_after']} after. Median over interleaved rounds.",
+        "",
+        "| Contender | steps/s (median) | rounds | × raw stepping | × SB3 | version |",
+        "|---|---:|---|---:|---:|---|",
+    ]
+    for row in rows:
+        speed = f"{float(row['steps_per_s']):,.0f}" if row["steps_per_s"] else "—"
+        lines.append(
+            f"| {SPEED_NAMES.get(row['contender'], row['contender'])} | {speed} | {row['rounds'].replace(';', ', ')} "
+            f"| {row['vs_raw'] or '—'} | {row['vs_sb3'] or '—'} | {row['version']} |"
+        )
+    lines += ["", f"Command: `{first['command']}`"]
+    return lines
+
+
+def progress_curves(folder) -> tuple[list[float], list[float]] | None:
+    rows = records.read_rows(Path(folder) / "progress.csv")
+    points = [(float(r["step"]), float(r["return_mean"])) for r in rows if r["return_mean"] not in ("", "nan")]
+    points = [(step, value) for step, value in points if math.isfinite(value)]
+    if not points:
+        return None
+    return [p[0] for p in points], [p[1] for p in points]
+
+
+def plot_mujoco(rows: list[dict], runs_root, out) -> Path | None:
+    """Seven panels: the mean over seeds of the last-100-episode return, the min–max band over seeds, the paper."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from minippo.plotting import INK, ORANGE
+
+    envs = [env_id for env_id in TASKS if any(row["env"] == env_id for row in rows)]
+    if not envs:
+        return None
+    cols = 4
+    fig, axes = plt.subplots(2, cols, figsize=(13, 5.6), dpi=100)
+    axes = axes.ravel()
+    for ax, env_id in zip(axes, envs):
+        curves = []
+        for row in rows:
+            if row["env"] == env_id:
+                curve = progress_curves(Path(runs_root) / f"{env_id}-seed{row['seed']}")
+                if curve:
+                    curves.append(curve)
+        if not curves:
+            continue
+        end = min(curve[0][-1] for curve in curves)
+        grid = np.linspace(max(curve[0][0] for curve in curves), end, 200)
+        values = np.array([np.interp(grid, steps, returns) for steps, returns in curves])
+        ax.fill_between(grid, values.min(axis=0), values.max(axis=0), color=ORANGE, alpha=0.25, lw=0)
+        ax.plot(grid, values.mean(axis=0), color=ORANGE, lw=2, label=f"minippo, {len(curves)} seeds")
+        low, high = PAPER[env_id]
+        if high > low:
+            ax.axhspan(low, high, color=INK, alpha=0.15)
+        ax.axhline(low, color=INK, ls="--", lw=1, label="paper, Fig. 3 (read off)")
+        ax.set_title(env_id, fontsize=10)
+        ax.grid(alpha=0.3)
+        ax.ticklabel_format(axis="x", style="sci", scilimits=(0, 0))
+    for ax in axes[len(envs) :]:
+        ax.axis("off")
+    axes[0].legend(frameon=False, fontsize=8)
+    fig.supxlabel("environment steps", fontsize=9)
+    fig.supylabel("mean return, last 100 episodes", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(out)
+    plt.close(fig)
+    return Path(out)
+
+
+def plot_table1(table: list[dict], out) -> Path | None:
+    if not table:
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from minippo.plotting import INK, ORANGE
+
+    names = [row["setting"] for row in table]
+    y = np.arange(len(names))
+    fig, ax = plt.subplots(figsize=(7.5, 4.5), dpi=100)
+    ax.barh(y - 0.2, [float(row["score"]) for row in table], 0.4, color=ORANGE, label="minippo (reduced scale)")
+    ax.barh(y + 0.2, [float(row["paper_score"]) for row in table], 0.4, color=INK, alpha=0.6, label="paper, Table 1")
+    ax.set_yticks(y, names, fontsize=8)
+    ax.invert_yaxis()
+    ax.axvline(0, color=INK, lw=0.8)
+    ax.set_xlabel("normalised score (random = 0, best run = 1)")
+    ax.legend(frameon=False, fontsize=8)
+    ax.grid(axis="x", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(out)
+    plt.close(fig)
+    return Path(out)
+
+
+def build(results, runs_root) -> tuple[str, list[str]]:
+    """The text of summary.md and the seven-task table's lines."""
+    results = Path(results)
+    mujoco_rows = records.read_rows(results / "mujoco.csv")
+    stats = task_stats(mujoco_rows)
+    table = mujoco_table(stats)
+    table1 = records.read_rows(results / "table1.csv")
+    randoms = records.read_rows(results / "random.csv")
+    speed = records.read_rows(results / "speed.csv")
+    commits = sorted({row["commit"] for row in mujoco_rows})
+    parts = [
+        "# Benchmark summary",
+        "",
+        "Generated by `python benchmarks/summary.py` from the records in `benchmarks/results/`; do not edit by hand.",
+        "",
+        "## Seven MuJoCo tasks, 1M steps, paper defaults",
+        "",
+        *table,
+        "",
+        mujoco_verdict(stats),
+        "",
+        SOURCES,
+        "",
+    ]
+    if commits:
+        parts += [f"Records made at commit(s) {', '.join(commits)}; each row of mujoco.csv holds its command.", ""]
+    if mujoco_rows:
+        parts += ["![Learning curves: mean over seeds, band from min to max](mujoco_curves.png)", ""]
+    parts += ["## Table 1: surrogate objectives, reduced scale", "", *table1_lines(table1, randoms), ""]
+    if table1:
+        parts += ["![Table 1: minippo's scores beside the paper's](table1.png)", ""]
+    parts += ["## Speed race", "", *speed_lines(speed), ""]
+    return "\n".join(parts), table
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--results", default=str(records.RESULTS), help="the folder of the CSV records")
+    parser.add_argument("--runs", default=str(records.RUNS / "mujoco"), help="the seven-task run folders")
+    parser.add_argument("--table-only", action="store_true", help="print the seven-task table and stop")
+    args = parser.parse_args(argv)
+    results = Path(args.results)
+    if not results.is_dir():
+        records.fail(f"no results folder {args.results}")
+    text, table = build(results, args.runs)
+    if args.table_only:
+        print("\n".join(table))
+        return 0
+    (results / "summary.md").write_text(text)
+    plot_mujoco(records.read_rows(results / "mujoco.csv"), args.runs, results / "mujoco_curves.png")
+    plot_table1(records.read_rows(results / "table1.csv"), results / "table1.png")
+    print(f"wrote {records.relative(results / 'summary.md')} and its figures")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

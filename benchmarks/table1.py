@@ -1,0 +1,216 @@
+"""Table 1 of the paper at a reduced scale: which surrogate objective works best.
+
+    python benchmarks/table1.py            # random baselines, then every (setting, task, seed) not yet recorded, then
+                                           # the scores in benchmarks/results/table1.csv
+    python benchmarks/table1.py --score    # only recompute table1.csv from the records
+
+The paper ran 11 settings × 7 tasks × 3 seeds × 1M steps (231M steps). Here: 11 settings × 3 tasks (HalfCheetah-v5,
+Hopper-v5, InvertedDoublePendulum-v5) × 1 seed × 300,000 steps (146 updates of 2048 steps = 299,008 steps), about
+10M steps. Everything else is the paper's MuJoCo defaults. Scoring as the paper's: per task, the random policy's
+mean return is 0 and the best final return of any run on that task is 1; a setting's score is the mean over its
+tasks and seeds. Each run's return is the mean of its last 100 episodes at the end of training.
+
+Runs are recorded in benchmarks/results/table1_runs.csv (one row per run, with its command), resumable and
+parallel-safe like the seven-task runner: start the script twice to run two trainings at once.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import subprocess
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import random_policy  # noqa: E402
+import records  # noqa: E402
+
+# (name, minippo train options, the paper's Table 1 score); the paper's numbers as quoted in ppo-facts.md
+SETTINGS = [
+    ("No clipping or penalty", ["--objective", "cpi"], -0.39),
+    ("Clipping, ε = 0.1", ["--objective", "clip", "--config", "clip_epsilon=0.1"], 0.76),
+    ("Clipping, ε = 0.2", ["--objective", "clip", "--config", "clip_epsilon=0.2"], 0.82),
+    ("Clipping, ε = 0.3", ["--objective", "clip", "--config", "clip_epsilon=0.3"], 0.70),
+    ("Adaptive KL, d_targ = 0.003", ["--objective", "klpen", "--config", "kl_target=0.003"], 0.68),
+    ("Adaptive KL, d_targ = 0.01", ["--objective", "klpen", "--config", "kl_target=0.01"], 0.74),
+    ("Adaptive KL, d_targ = 0.03", ["--objective", "klpen", "--config", "kl_target=0.03"], 0.71),
+    ("Fixed KL, β = 0.3", ["--objective", "klpen", "--config", "adaptive_kl=false", "kl_beta=0.3"], 0.62),
+    ("Fixed KL, β = 1", ["--objective", "klpen", "--config", "adaptive_kl=false", "kl_beta=1"], 0.71),
+    ("Fixed KL, β = 3", ["--objective", "klpen", "--config", "adaptive_kl=false", "kl_beta=3"], 0.72),
+    ("Fixed KL, β = 10", ["--objective", "klpen", "--config", "adaptive_kl=false", "kl_beta=10"], 0.69),
+]
+TASKS = ["HalfCheetah-v5", "Hopper-v5", "InvertedDoublePendulum-v5"]
+SEEDS = [1]
+STEPS = 300_000
+RANDOM_EPISODES, RANDOM_SEED = 100, 0
+RUN_FIELDS = ["setting", "env", "seed", "steps", "return_mean", "wall_s", "steps_per_s", "commit", "command"]
+TABLE_FIELDS = ["setting", "score", "paper_score", "runs", "tasks", "seeds", "steps", "scale"]
+RUNS_CSV = records.RESULTS / "table1_runs.csv"
+TABLE_CSV = records.RESULTS / "table1.csv"
+RUN_ROOT = records.RUNS / "table1"
+
+
+def slug(setting: str) -> str:
+    """'Adaptive KL, d_targ = 0.003' -> 'adaptive-kl-dtarg-0.003' (a folder name)."""
+    text = setting.lower().replace("ε", "eps").replace("β", "beta").replace("d_targ", "dtarg")
+    words = "".join(c if c.isalnum() or c == "." else " " for c in text).split()
+    return "-".join(words)
+
+
+def normalized_scores(runs: list[dict], random_return: dict[str, float]) -> dict[str, dict]:
+    """Table 1's scoring. ``runs``: dicts with setting, env, return_mean. Per task, the random policy's return maps
+    to 0 and the best run's return (over every setting and seed on that task) to 1; each setting's score is the
+    mean of its runs' normalised returns. Returns {setting: {"score", "runs", "tasks"}}."""
+    best: dict[str, float] = {}
+    for run in runs:
+        best[run["env"]] = max(best.get(run["env"], -float("inf")), float(run["return_mean"]))
+    per_setting = defaultdict(list)
+    tasks = defaultdict(set)
+    for run in runs:
+        env_id = run["env"]
+        if env_id not in random_return:
+            raise records.BenchmarkError(f"no random-policy return recorded for {env_id}")
+        span = best[env_id] - random_return[env_id]
+        if span <= 0:
+            raise records.BenchmarkError(f"on {env_id} no run beats the random policy, so the score is undefined")
+        per_setting[run["setting"]].append((float(run["return_mean"]) - random_return[env_id]) / span)
+        tasks[run["setting"]].add(env_id)
+    return {
+        setting: {"score": sum(values) / len(values), "runs": len(values), "tasks": len(tasks[setting])}
+        for setting, values in per_setting.items()
+    }
+
+
+def write_table(runs_csv, random_csv, table_csv, tasks, seeds, steps) -> list[dict]:
+    """Score the recorded runs of ``tasks`` × ``seeds`` and (re)write table1.csv, in the paper's row order."""
+    randoms = {
+        row["env"]: float(row["return_mean"])
+        for row in records.read_rows(random_csv)
+        if row["episodes"] == str(RANDOM_EPISODES) and row["seed"] == str(RANDOM_SEED)
+    }
+    runs = [
+        row
+        for row in records.read_rows(runs_csv)
+        if row["env"] in tasks and int(row["seed"]) in seeds and int(row["steps"]) == (steps // 2048) * 2048
+    ]
+    if not runs:
+        raise records.BenchmarkError(f"no runs recorded in {records.relative(runs_csv)} yet")
+    scores = normalized_scores(runs, randoms)
+    scale = (
+        f"tasks {' '.join(tasks)}; seeds {' '.join(str(seed) for seed in seeds)}; {(steps // 2048) * 2048:,} steps "
+        "per run (paper: 7 tasks, 3 seeds, 1M steps)"
+    )
+    table = []
+    for name, _, paper in SETTINGS:
+        if name not in scores:
+            continue
+        table.append(
+            {
+                "setting": name,
+                "score": round(scores[name]["score"], 2),
+                "paper_score": paper,
+                "runs": scores[name]["runs"],
+                "tasks": scores[name]["tasks"],
+                "seeds": len(seeds),
+                "steps": (steps // 2048) * 2048,
+                "scale": scale,
+            }
+        )
+    Path(table_csv).parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(table_csv).with_suffix(".tmp")
+    with open(tmp, "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=TABLE_FIELDS, lineterminator="\n")
+        writer.writeheader()
+        writer.writerows(table)
+    tmp.replace(table_csv)
+    return table
+
+
+def run_one(name, options, env_id, seed, steps, runs_csv, root, claims) -> str:
+    folder = Path(root) / f"{slug(name)}-{env_id}-seed{seed}"
+    with records.claim(folder.name, claims) as mine:
+        if not mine:
+            return "claimed by another runner"
+        if records.is_recorded(runs_csv, {"setting": name, "env": env_id, "seed": seed}):
+            return "already recorded"
+        commands = records.launch_or_resume(env_id, steps, seed, folder, options, claims)
+        if commands is None:
+            return "running outside this runner"
+        records.compact_progress(folder)
+        last = records.last_progress(folder)
+        row = {
+            "setting": name,
+            "env": env_id,
+            "seed": seed,
+            "steps": int(last["step"]),
+            "return_mean": round(float(last["return_mean"]), 2),
+            "wall_s": round(float(last["wall_s"]), 1),
+            "steps_per_s": round(float(last["steps_per_s"]), 1),
+            "commit": records.launch_commit(folder, claims),
+            "command": " && ".join(commands),
+        }
+        records.append_row(runs_csv, RUN_FIELDS, row, unique=("setting", "env", "seed"))
+        return f"recorded: return {row['return_mean']}"
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--envs", nargs="+", default=TASKS, metavar="ENV")
+    parser.add_argument("--seeds", nargs="+", type=int, default=SEEDS)
+    parser.add_argument("--steps", type=int, default=STEPS)
+    parser.add_argument("--score", action="store_true", help="only rewrite table1.csv from the recorded runs")
+    parser.add_argument("--runs-csv", default=str(RUNS_CSV))
+    parser.add_argument("--random-csv", default=str(random_policy.CSV_PATH))
+    parser.add_argument("--table-csv", default=str(TABLE_CSV))
+    parser.add_argument("--runs", default=str(RUN_ROOT), help="the folder of run folders")
+    args = parser.parse_args(argv)
+    if args.steps < 2048:
+        records.fail(f"--steps must be at least one horizon (2048), not {args.steps}")
+    try:
+        if not args.score:
+            missing = [
+                env_id
+                for env_id in args.envs
+                if not records.is_recorded(
+                    args.random_csv, {"env": env_id, "episodes": RANDOM_EPISODES, "seed": RANDOM_SEED}
+                )
+            ]
+            if missing:
+                script = str(Path(__file__).resolve().parent / "random_policy.py")
+                subprocess.run(
+                    [
+                        sys.executable,
+                        script,
+                        *missing,
+                        "--episodes",
+                        str(RANDOM_EPISODES),
+                        "--seed",
+                        str(RANDOM_SEED),
+                        "--csv",
+                        args.random_csv,
+                    ],
+                    check=True,
+                    cwd=records.ROOT,
+                )
+            claims = Path(args.runs) / ".claims"
+            for env_id in args.envs:  # task by task, so that a partial table already covers whole tasks
+                for seed in args.seeds:
+                    for name, options, _ in SETTINGS:
+                        try:
+                            status = run_one(name, options, env_id, seed, args.steps, args.runs_csv, args.runs, claims)
+                        except records.BenchmarkError as error:
+                            status = f"failed: {error}"
+                        print(f"{name} / {env_id} seed {seed}: {status}", flush=True)
+        table = write_table(args.runs_csv, args.random_csv, args.table_csv, args.envs, args.seeds, args.steps)
+    except (records.BenchmarkError, subprocess.CalledProcessError) as error:
+        records.fail(str(error))
+    for row in table:
+        print(f"{row['setting']:<30} {row['score']:>6.2f}   paper {row['paper_score']:>5.2f}   ({row['runs']} runs)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
