@@ -1,0 +1,311 @@
+"""The benchmark scripts' logic on small made-up records: Table 1's scoring, CSV appends and resumes, run claims,
+the speed table's ratios, and the summary. No training runs here: ``minippo train`` is replaced by a stub that
+writes what a finished training leaves behind."""
+
+import csv
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+
+import records  # noqa: E402
+import seven_tasks  # noqa: E402
+import speed  # noqa: E402
+import summary  # noqa: E402
+import table1  # noqa: E402
+
+
+def write_csv(path, rows):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def fake_run(folder, updates, returns, horizon=2048, checkpoint_update=None):
+    """A run folder as ``minippo train`` leaves it: progress.csv with one row per update, and a checkpoint."""
+    folder.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for update, value in zip(range(1, updates + 1), returns):
+        rows.append(
+            {
+                "update": update,
+                "step": update * horizon,
+                "return_mean": repr(float(value)),
+                "steps_per_s": "3000.123456789",
+                "wall_s": repr(update * horizon / 3000.123456789),
+            }
+        )
+    write_csv(folder / "progress.csv", rows)
+    np.savez(folder / "checkpoint.npz", update=np.array(updates if checkpoint_update is None else checkpoint_update))
+
+
+# Table 1's scoring
+
+
+def test_normalized_scores_match_hand_computation():
+    randoms = {"A": 0.0, "B": -100.0}
+    runs = [
+        {"setting": "clip", "env": "A", "return_mean": "80"},
+        {"setting": "clip", "env": "B", "return_mean": "100"},  # best on B
+        {"setting": "cpi", "env": "A", "return_mean": "-40"},  # below random: negative score
+        {"setting": "cpi", "env": "B", "return_mean": "0"},
+        {"setting": "kl", "env": "A", "return_mean": "100"},  # best on A
+        {"setting": "kl", "env": "B", "return_mean": "50"},
+    ]
+    scores = table1.normalized_scores(runs, randoms)
+    # A: random 0, best 100; B: random -100, best 100 (span 200)
+    assert scores["clip"]["score"] == pytest.approx((0.8 + 1.0) / 2)
+    assert scores["cpi"]["score"] == pytest.approx((-0.4 + 0.5) / 2)
+    assert scores["kl"]["score"] == pytest.approx((1.0 + 0.75) / 2)
+    assert scores["clip"]["runs"] == 2 and scores["clip"]["tasks"] == 2
+
+
+def test_normalized_scores_average_over_seeds():
+    runs = [
+        {"setting": "s", "env": "A", "return_mean": "10"},
+        {"setting": "s", "env": "A", "return_mean": "30"},
+        {"setting": "t", "env": "A", "return_mean": "50"},
+    ]
+    scores = table1.normalized_scores(runs, {"A": 10.0})
+    assert scores["s"]["score"] == pytest.approx((0.0 + 0.5) / 2)
+    assert scores["t"]["score"] == pytest.approx(1.0)
+
+
+def test_normalized_scores_refuse_missing_random_or_no_progress():
+    with pytest.raises(records.BenchmarkError, match="no random-policy return"):
+        table1.normalized_scores([{"setting": "s", "env": "A", "return_mean": "1"}], {})
+    with pytest.raises(records.BenchmarkError, match="beats the random policy"):
+        table1.normalized_scores([{"setting": "s", "env": "A", "return_mean": "1"}], {"A": 5.0})
+
+
+def test_write_table_keeps_the_paper_column_and_order(tmp_path):
+    runs = []
+    for name, _, _ in table1.SETTINGS:
+        value = {"No clipping or penalty": 0.0, "Clipping, ε = 0.2": 200.0}.get(name, 100.0)
+        runs.append(
+            {
+                "setting": name,
+                "env": "A",
+                "seed": 1,
+                "steps": 4096,
+                "return_mean": value,
+                "wall_s": 1,
+                "steps_per_s": 1,
+                "commit": "x",
+                "command": "c",
+            }
+        )
+    write_csv(tmp_path / "runs.csv", runs)
+    write_csv(tmp_path / "random.csv", [{"env": "A", "episodes": 100, "seed": 0, "return_mean": 0.0}])
+    table = table1.write_table(tmp_path / "runs.csv", tmp_path / "random.csv", tmp_path / "t.csv", ["A"], [1], 5000)
+    assert [row["setting"] for row in table] == [name for name, _, _ in table1.SETTINGS]
+    written = records.read_rows(tmp_path / "t.csv")
+    assert written[0]["score"] == "0.0" and written[0]["paper_score"] == "-0.39"
+    assert written[2]["score"] == "1.0" and written[2]["paper_score"] == "0.82"
+    assert written[1]["score"] == "0.5"
+    assert "4,096 steps" in written[0]["scale"] and "paper: 7 tasks" in written[0]["scale"]
+
+
+def test_slug_makes_distinct_folder_names():
+    slugs = [table1.slug(name) for name, _, _ in table1.SETTINGS]
+    assert len(set(slugs)) == len(slugs)
+    assert table1.slug("Adaptive KL, d_targ = 0.003") == "adaptive-kl-dtarg-0.003"
+    assert table1.slug("Clipping, ε = 0.2") == "clipping-eps-0.2"
+
+
+# records: appends, claims, finished runs, resumes
+
+
+def test_append_row_writes_header_once_and_skips_duplicates(tmp_path):
+    path = tmp_path / "r.csv"
+    fields = ["env", "seed", "value"]
+    assert records.append_row(path, fields, {"env": "A", "seed": 1, "value": 1.5}, unique=("env", "seed"))
+    assert records.append_row(path, fields, {"env": "A", "seed": 2, "value": 2.5}, unique=("env", "seed"))
+    assert not records.append_row(path, fields, {"env": "A", "seed": 1, "value": 9.9}, unique=("env", "seed"))
+    lines = path.read_text().splitlines()
+    assert lines == ["env,seed,value", "A,1,1.5", "A,2,2.5"]
+    with pytest.raises(records.BenchmarkError, match="columns"):
+        records.append_row(path, ["env", "other"], {"env": "A", "other": 1})
+
+
+def test_claim_is_exclusive_until_released(tmp_path):
+    with records.claim("run", tmp_path) as first:
+        assert first
+        with records.claim("run", tmp_path) as second:
+            assert not second
+        with records.claim("other", tmp_path) as third:
+            assert third
+    with records.claim("run", tmp_path) as again:
+        assert again
+
+
+def test_finished_needs_every_update_checkpointed(tmp_path):
+    fake_run(tmp_path / "done", 3, [1, 2, 3])
+    fake_run(tmp_path / "half", 2, [1, 2])
+    fake_run(tmp_path / "unsaved", 3, [1, 2, 3], checkpoint_update=2)
+    assert records.finished(tmp_path / "done", 3 * 2048)
+    assert records.finished(tmp_path / "done", 3 * 2048 + 100)  # the last partial batch is never run
+    assert not records.finished(tmp_path / "half", 3 * 2048)
+    assert not records.finished(tmp_path / "unsaved", 3 * 2048)
+    assert not records.finished(tmp_path / "missing", 3 * 2048)
+
+
+def test_compact_progress_rounds_floats_and_keeps_integers(tmp_path):
+    fake_run(tmp_path / "run", 2, [1.23456789012, float("nan")])
+    records.compact_progress(tmp_path / "run")
+    rows = records.read_rows(tmp_path / "run" / "progress.csv")
+    assert rows[0]["update"] == "1" and rows[1]["step"] == "4096"
+    assert rows[0]["return_mean"] == "1.23457" and rows[1]["return_mean"] == "nan"
+    assert rows[0]["steps_per_s"] == "3000.12"
+
+
+@pytest.fixture
+def stub_training(monkeypatch):
+    """Replace the subprocess with a stub that finishes (or resumes) the run in the --out folder."""
+    calls = []
+
+    def fake(argv, log, on_start=None):
+        calls.append(argv)
+        out = Path(argv[argv.index("--out") + 1])
+        if not out.is_absolute():
+            out = records.ROOT / out
+        if on_start:
+            on_start(999_999_999)  # a pid that is not alive
+        fake_run(out, 2, [10.0, 20.0])
+
+    monkeypatch.setattr(records, "run_training", fake)
+    return calls
+
+
+def test_runner_records_runs_and_skips_recorded_ones(tmp_path, stub_training):
+    csv_path, runs = tmp_path / "mujoco.csv", tmp_path / "runs"
+    args = [
+        "--envs",
+        "Hopper-v5",
+        "Swimmer-v5",
+        "--seeds",
+        "1",
+        "2",
+        "--steps",
+        "4096",
+        "--csv",
+        str(csv_path),
+        "--runs",
+        str(runs),
+    ]
+    assert seven_tasks.main(args) == 0
+    rows = records.read_rows(csv_path)
+    assert [(row["env"], row["seed"]) for row in rows] == [
+        ("Hopper-v5", "1"),
+        ("Hopper-v5", "2"),
+        ("Swimmer-v5", "1"),
+        ("Swimmer-v5", "2"),
+    ]
+    assert rows[0]["return_mean"] == "20.0" and rows[0]["steps"] == "4096"
+    assert rows[0]["command"].endswith(
+        f"minippo train Hopper-v5 --steps 4096 --seed 1 --out {runs}/Hopper-v5-seed1 --quiet"
+    )
+    assert len(stub_training) == 4
+    assert seven_tasks.main(args) == 0  # everything recorded: nothing runs again
+    assert len(stub_training) == 4 and len(records.read_rows(csv_path)) == 4
+
+
+def test_runner_resumes_a_folder_with_a_checkpoint_and_keeps_both_commands(tmp_path, stub_training):
+    runs, claims = tmp_path / "runs", tmp_path / "runs" / ".claims"
+    fake_run(runs / "Hopper-v5-seed1", 1, [5.0])  # stopped after one update
+    claims.mkdir(parents=True)
+    (claims / "Hopper-v5-seed1.json").write_text(json.dumps({"commands": ["first command"], "commit": "abc1234"}))
+    status = seven_tasks.run_one("Hopper-v5", 1, 4096, tmp_path / "m.csv", runs, claims)
+    assert status.startswith("recorded")
+    assert "--resume" in stub_training[0] and "--force" not in stub_training[0]
+    row = records.read_rows(tmp_path / "m.csv")[0]
+    assert row["command"].startswith("first command && ") and "--resume" in row["command"]
+    assert row["commit"] == "abc1234"
+
+
+def test_runner_restarts_a_folder_without_checkpoint(tmp_path, stub_training):
+    runs = tmp_path / "runs"
+    (runs / "Hopper-v5-seed1").mkdir(parents=True)
+    (runs / "Hopper-v5-seed1" / "config.json").write_text("{}")
+    seven_tasks.run_one("Hopper-v5", 1, 4096, tmp_path / "m.csv", runs, runs / ".claims")
+    assert "--force" in stub_training[0] and "--resume" not in stub_training[0]
+
+
+def test_runner_skips_a_claimed_run(tmp_path, stub_training):
+    runs = tmp_path / "runs"
+    with records.claim("Hopper-v5-seed1", runs / ".claims"):
+        status = seven_tasks.run_one("Hopper-v5", 1, 4096, tmp_path / "m.csv", runs, runs / ".claims")
+    assert status == "claimed by another runner" and not stub_training
+
+
+def test_runner_refuses_bad_input(capsys):
+    with pytest.raises(SystemExit) as stop:
+        seven_tasks.main(["--envs", "Hoper-v5"])
+    assert stop.value.code == 2
+    assert "unknown task Hoper-v5" in capsys.readouterr().err
+
+
+# speed table and summary
+
+
+def test_speed_ratios_use_medians():
+    rounds = {"raw": [100.0, 300.0, 200.0], "minippo": [50.0, 150.0, 120.0], "sb3": [10.0, 30.0, 20.0]}
+    rows = {row["contender"]: row for row in speed.summarize("E", rounds, {"raw": 5}, {})}
+    assert rows["raw"]["steps_per_s"] == 200.0 and rows["minippo"]["steps_per_s"] == 120.0
+    assert rows["minippo"]["vs_raw"] == pytest.approx(0.6) and rows["minippo"]["vs_sb3"] == pytest.approx(6.0)
+    assert rows["minippo"]["rounds"] == "50.0;150.0;120.0"
+    skipped = {
+        row["contender"]: row for row in speed.summarize("E", {"raw": [1.0], "minippo": [2.0], "sb3": []}, {}, {})
+    }
+    assert skipped["sb3"]["steps_per_s"] == "" and skipped["minippo"]["vs_sb3"] == ""
+
+
+def test_summary_from_a_tiny_fixture(tmp_path):
+    results, runs = tmp_path / "results", tmp_path / "runs"
+    mujoco = []
+    for seed, final in zip((1, 2, 3), (2100.0, 2400.0, 2700.0)):
+        fake_run(runs / f"Hopper-v5-seed{seed}", 3, [10.0, 1000.0, final])
+        mujoco.append(
+            {
+                "env": "Hopper-v5",
+                "seed": seed,
+                "steps": 6144,
+                "return_mean": final,
+                "wall_s": 60,
+                "steps_per_s": 3000,
+                "commit": "abc",
+                "command": "c",
+            }
+        )
+    fake_run(runs / "Swimmer-v5-seed1", 3, [1, 2, 50.0])
+    mujoco.append(
+        {
+            "env": "Swimmer-v5",
+            "seed": 1,
+            "steps": 6144,
+            "return_mean": 50.0,
+            "wall_s": 30,
+            "steps_per_s": 4000,
+            "commit": "abc",
+            "command": "c",
+        }
+    )
+    write_csv(results / "mujoco.csv", mujoco)
+    assert summary.main(["--results", str(results), "--runs", str(runs)]) == 0
+    text = (results / "summary.md").read_text()
+    hopper = next(line for line in text.splitlines() if line.startswith("| Hopper-v5"))
+    # mean 2400, sample std 300; the paper's low end 2200 is beaten
+    assert "2400.0 ± 300.0 (n = 3)" in hopper and "| yes |" in hopper and "2383 ± 272" in hopper
+    swimmer = next(line for line in text.splitlines() if line.startswith("| Swimmer-v5"))
+    assert "50.0 ± 0.0 (n = 1)" in swimmer and "| no |" in swimmer
+    assert "| Walker2d-v5 | not run yet" in text
+    assert "1 of 7 tasks have 3 seeds recorded" in text and "on 1 of them (Hopper-v5)" in text
+    assert "No Table 1 runs are recorded yet." in text and "has not been run yet" in text
+    assert (results / "mujoco_curves.png").stat().st_size > 0
+    assert not (results / "table1.png").exists()
