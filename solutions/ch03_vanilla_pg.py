@@ -1,0 +1,37 @@
+"""Chapter 3: the vanilla policy gradient objective L^PG, and advantages with a baseline.
+
+Objectives are written as the paper writes them, as something to *maximise*, averaged over a minibatch of n samples,
+and each returns its value together with its gradient with respect to log π_θ(a_t|s_t), one entry per sample. The
+distribution's ``*_backward`` (chapter 2) and the network's backward pass (chapter 1) carry that gradient on to θ.
+
+Grade: ``minippo grade 3``
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+EXERCISES = ["pg_objective", "normalize_advantages"]
+
+
+def pg_objective(logp: np.ndarray, advantages: np.ndarray):
+    """L^PG = Ê_t[log π_θ(a_t|s_t) Â_t]  (eq. 2), the mean over the n samples of the batch.
+
+    logp: (n,) log π_θ(a_t|s_t).  advantages: (n,) Â_t, constants (no gradient flows into them).
+    Returns (value, grad): value a Python float; grad of shape (n,) is ∂L^PG/∂ log π_t = Â_t / n.
+    """
+    n = len(logp)
+    value = float(np.mean(logp * advantages))
+    return value, advantages / n
+
+
+def normalize_advantages(advantages: np.ndarray) -> np.ndarray:
+    """(Â − mean Â) / (std Â + 1e-8): a baseline (the mean) and a common scale for one minibatch.
+
+    advantages: (n,).  Returns a new (n,) array with mean 0 and standard deviation (nearly) 1; std is the
+    population standard deviation (np.std). A batch of one sample has no spread to measure: return it unchanged
+    (a copy). Equal advantages give zeros, never NaN (that is what the 1e-8 is for).
+    """
+    if len(advantages) < 2:
+        return np.array(advantages, dtype=np.float64)
+    return (advantages - advantages.mean()) / (advantages.std() + 1e-8)

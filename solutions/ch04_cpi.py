@@ -1,0 +1,34 @@
+"""Chapter 4: the importance ratio and the conservative policy iteration surrogate L^CPI.
+
+The samples come from the snapshot π_θold that collected them, and we improve π_θ on them for several epochs; the
+ratio r_t(θ) = π_θ(a_t|s_t) / π_θold(a_t|s_t) reweights each sample to the policy being optimised.
+
+Grade: ``minippo grade 4``
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+EXERCISES = ["importance_ratio", "cpi_objective"]
+
+
+def importance_ratio(logp: np.ndarray, logp_old: np.ndarray) -> np.ndarray:
+    """r_t = π_θ(a_t|s_t) / π_θold(a_t|s_t), computed from log-probabilities as exp(log π_θ − log π_θold).
+
+    logp, logp_old: (n,).  Returns (n,), finite and correct even when both log-probabilities are very negative
+    (−800 and −801 give e, although exp(−800) underflows to 0).
+    """
+    return np.exp(logp - logp_old)
+
+
+def cpi_objective(logp: np.ndarray, logp_old: np.ndarray, advantages: np.ndarray):
+    """L^CPI = Ê_t[r_t(θ) Â_t]  (eq. 6).
+
+    logp: (n,) log π_θ, the variable.  logp_old: (n,) log π_θold, a constant.  advantages: (n,) constants.
+    Returns (value, grad): value a float; grad = ∂L^CPI/∂ log π_t = r_t Â_t / n, shape (n,), because
+    ∂r_t/∂ log π_t = r_t. At θ = θ_old (r = 1) it equals the policy gradient of L^PG.
+    """
+    n = len(logp)
+    ratio = importance_ratio(logp, logp_old)
+    return float(np.mean(ratio * advantages)), ratio * advantages / n

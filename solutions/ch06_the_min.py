@@ -1,0 +1,32 @@
+"""Chapter 6: the min in L^CLIP, and the asymmetry it creates.
+
+L^CLIP takes the smaller of the unclipped term r_t Â_t and the clipped term clip(r_t, 1 − ε, 1 + ε) Â_t. The result
+is a pessimistic bound: the objective never gains from moving r_t past the band in the direction that helps, but it
+keeps the full (unclipped) penalty for moves that make things worse.
+
+Grade: ``minippo grade 6``
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+EXERCISES = ["clip_objective"]
+
+
+def clip_objective(logp: np.ndarray, logp_old: np.ndarray, advantages: np.ndarray, epsilon: float):
+    """L^CLIP = Ê_t[min(r_t Â_t, clip(r_t, 1 − ε, 1 + ε) Â_t)]  (eq. 7), and its gradient.
+
+    logp: (n,) log π_θ, the variable.  logp_old, advantages: (n,) constants.  epsilon: ε > 0.
+    Returns (value, grad): value a float, never above L^CPI on the same batch; grad = ∂L^CLIP/∂ log π_t, shape (n,):
+        0           where the clipped term is the smaller one, which is r_t > 1 + ε with Â_t > 0, or
+                    r_t < 1 − ε with Â_t < 0 (past the band in the direction that helps)
+        r_t Â_t / n everywhere else, including past the band in the direction that hurts.
+    """
+    n = len(logp)
+    ratio = np.exp(logp - logp_old)
+    unclipped = ratio * advantages
+    clipped = np.clip(ratio, 1.0 - epsilon, 1.0 + epsilon) * advantages
+    # the clipped term is flat in θ; where it is the smaller, the min passes no gradient
+    unclipped_is_min = unclipped <= clipped
+    return float(np.mean(np.minimum(unclipped, clipped))), np.where(unclipped_is_min, unclipped, 0.0) / n

@@ -1,0 +1,70 @@
+"""Chapter 7: returns, TD residuals and generalized advantage estimation over a batch that holds several episodes.
+
+A batch has T steps (shape (T,), or (T, N) for N environments side by side, time first). Step t has a reward r_t, the
+value V(s_t) (``values``), the value of the observation that followed it (``next_values[t]``), and two flags:
+- ``terminated[t]``: the episode reached a terminal state at step t; nothing follows, so V(s_{t+1}) counts as 0;
+- ``truncated[t]``: a time limit cut the episode at step t; the state was not terminal, so bootstrap from
+  next_values[t], which holds V of the episode's final observation.
+Either way step t+1 starts a new episode, so nothing flows back across the boundary. The last step of the batch is
+cut by the horizon: bootstrap it from next_values[T−1] unless it terminated.
+
+Grade: ``minippo grade 7``
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+EXERCISES = ["discounted_returns", "td_residuals", "gae"]
+
+
+def discounted_returns(rewards, next_values, terminated, truncated, gamma: float) -> np.ndarray:
+    """G_t, the discounted return from step t to the end of its episode, bootstrapped where it was cut.
+
+        G_t = r_t                      if terminated[t]
+        G_t = r_t + γ next_values[t]   if truncated[t], or t = T−1 (and not terminated)
+        G_t = r_t + γ G_{t+1}          otherwise
+    rewards, next_values: float arrays (T,) or (T, N); terminated, truncated: bool arrays of the same shape.
+    Returns a new float64 array of the same shape.
+    """
+    rewards = np.asarray(rewards, dtype=np.float64)
+    terminated, truncated = np.asarray(terminated, dtype=bool), np.asarray(truncated, dtype=bool)
+    returns = np.zeros_like(rewards)
+    T = len(rewards)
+    for t in range(T - 1, -1, -1):
+        if t == T - 1:
+            following = next_values[t]
+        else:
+            following = np.where(truncated[t], next_values[t], returns[t + 1])
+        returns[t] = rewards[t] + gamma * np.where(terminated[t], 0.0, following)
+    return returns
+
+
+def td_residuals(rewards, values, next_values, terminated, gamma: float) -> np.ndarray:
+    """δ_t = r_t + γ V(s_{t+1}) − V(s_t)  (eq. 12), with V(s_{t+1}) = next_values[t], or 0 where terminated[t].
+
+    Arrays of shape (T,) or (T, N). Returns a new float64 array of the same shape. A value function that is exact
+    (V(s_t) = r_t + γ V(s_{t+1}) everywhere) gives δ = 0.
+    """
+    rewards = np.asarray(rewards, dtype=np.float64)
+    not_terminal = ~np.asarray(terminated, dtype=bool)
+    return rewards + gamma * np.where(not_terminal, next_values, 0.0) - np.asarray(values, dtype=np.float64)
+
+
+def gae(rewards, values, next_values, terminated, truncated, gamma: float, lam: float) -> np.ndarray:
+    """Truncated GAE (eq. 11): Â_t = δ_t + (γλ) δ_{t+1} + (γλ)² δ_{t+2} + ..., summed to the end of t's episode.
+
+    Computed backwards: Â_{T−1} = δ_{T−1}, and Â_t = δ_t + γλ Â_{t+1} inside an episode, Â_t = δ_t at a step that
+    ended its episode (terminated or truncated; the bootstrap is already inside δ_t). λ = 0 gives δ_t; λ = 1 gives the
+    discounted return minus V(s_t). Arrays of shape (T,) or (T, N); returns a new float64 array of the same shape.
+    """
+    deltas = td_residuals(rewards, values, next_values, terminated, gamma)
+    ends = np.asarray(terminated, dtype=bool) | np.asarray(truncated, dtype=bool)
+    advantages = np.zeros_like(deltas)
+    T = len(deltas)
+    for t in range(T - 1, -1, -1):
+        if t == T - 1:
+            advantages[t] = deltas[t]
+        else:
+            advantages[t] = deltas[t] + gamma * lam * np.where(ends[t], 0.0, advantages[t + 1])
+    return advantages

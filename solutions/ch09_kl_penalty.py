@@ -1,0 +1,65 @@
+"""Chapter 9: the KL penalty and its adaptive coefficient β (eq. 8).
+
+The penalised surrogate is L^KLPEN = Ê[r_t Â_t − β KL[π_θold(·|s_t), π_θ(·|s_t)]]; after each policy update,
+β is halved if the measured KL d was well below the target and doubled if it was well above.
+The KL is taken with the old policy first: KL[π_old ‖ π] = Σ_a π_old(a) (log π_old(a) − log π(a)).
+
+Grade: ``minippo grade 9``
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+EXERCISES = ["categorical_kl", "categorical_kl_backward", "kl_penalty_objective", "adaptive_beta"]
+
+
+def _log_softmax(logits: np.ndarray) -> np.ndarray:
+    shifted = logits - logits.max(axis=-1, keepdims=True)
+    return shifted - np.log(np.exp(shifted).sum(axis=-1, keepdims=True))
+
+
+def categorical_kl(logits_old: np.ndarray, logits: np.ndarray) -> np.ndarray:
+    """KL[π_old ‖ π] = Σ_j π_old,j (log π_old,j − log π_j) for every row: ≥ 0, and 0 only where the two agree.
+
+    logits_old, logits: (n, k).  Returns (n,), finite for logits of ±1000 (use log-softmax, not log of softmax).
+    """
+    log_old, log_new = _log_softmax(logits_old), _log_softmax(logits)
+    return (np.exp(log_old) * (log_old - log_new)).sum(axis=-1)
+
+
+def categorical_kl_backward(logits_old: np.ndarray, logits: np.ndarray, grad_kl: np.ndarray) -> np.ndarray:
+    """∂L/∂z (the new logits only; the old policy is a constant) from ∂L/∂KL: ∂KL/∂z_j = π_j − π_old,j.
+
+    grad_kl: (n,).  Returns (n, k).
+    """
+    probs_old, probs = np.exp(_log_softmax(logits_old)), np.exp(_log_softmax(logits))
+    return (probs - probs_old) * grad_kl[:, None]
+
+
+def kl_penalty_objective(logp, logp_old, advantages, kl, beta: float):
+    """L^KLPEN = Ê[r_t Â_t − β KL_t]  (eq. 8's surrogate), to maximise.
+
+    logp: (n,) the variable of the first term.  logp_old, advantages: (n,) constants.  kl: (n,) KL_t, the variable of
+    the penalty (categorical_kl, or the Gaussian one).  beta: β ≥ 0.
+    Returns (value, grad_logp, grad_kl): value a float; grad_logp = r_t Â_t / n; grad_kl = −β / n, both (n,).
+    """
+    n = len(logp)
+    ratio = np.exp(logp - logp_old)
+    value = float(np.mean(ratio * advantages)) - beta * float(np.mean(kl))
+    return value, ratio * advantages / n, np.full(n, -beta / n)
+
+
+def adaptive_beta(beta: float, kl: float, kl_target: float) -> float:
+    """Eq. 8's rule, applied after each policy update with d = Ê[KL] measured on the batch:
+
+        if d < d_targ / 1.5:  β ← β / 2
+        if d > d_targ × 1.5:  β ← β × 2
+        otherwise β is unchanged (also at exactly d_targ / 1.5 or d_targ × 1.5).
+    Returns the new β as a float.
+    """
+    if kl < kl_target / 1.5:
+        return beta / 2.0
+    if kl > kl_target * 1.5:
+        return beta * 2.0
+    return float(beta)

@@ -1,0 +1,65 @@
+"""Grading chapter 3: L^PG against its sum and finite differences; advantage normalisation and its edge cases."""
+
+import _harness
+import numpy as np
+import pytest
+from _harness import call_checking_inputs, check_array, check_close, check_scalar, numerical_gradient
+
+student = _harness.student  # the fixture: the implementation under test (see _harness.py)
+pytest_generate_tests = _harness.pytest_generate_tests  # one run per wrong variant under MINIPPO_IMPL=wrong
+rng = _harness.rng  # a seeded NumPy Generator
+
+pytestmark = pytest.mark.timeout(10)
+
+
+@pytest.mark.parametrize("n", [1, 9])
+def test_pg_objective_value_and_gradient(student, rng, n):
+    logp, advantages = rng.normal(-1.5, 0.7, n), rng.normal(size=n)
+    value, grad = call_checking_inputs(student.pg_objective, "pg_objective", logp, advantages)
+    total = 0.0
+    for t in range(n):
+        total += logp[t] * advantages[t]
+    check_close(check_scalar(value, "pg_objective"), total / n, "pg_objective", "the value Ê[log π · Â]")
+    check_array(grad, "pg_objective", (n,), "the gradient")
+    expected = numerical_gradient(lambda: float(student.pg_objective(logp, advantages)[0]), logp)
+    check_close(grad, expected, "pg_objective", "∂L/∂ log π (checked by finite differences of the value)")
+    check_close(grad, advantages / n, "pg_objective", "∂L/∂ log π (it should be Â_t / n)")
+
+
+def test_pg_objective_with_very_negative_log_probs(student):
+    logp = np.array([-700.0, -1200.0, -3.0])
+    value, grad = student.pg_objective(logp, np.array([1.0, -2.0, 0.5]))
+    check_close(check_scalar(value, "pg_objective"), (-700.0 + 2400.0 - 1.5) / 3, "pg_objective", "the value")
+    check_array(grad, "pg_objective", (3,), "the gradient")
+
+
+def test_normalize_advantages_gives_mean_zero_and_std_one(student, rng):
+    advantages = rng.normal(3.0, 5.0, 12)
+    normalized = call_checking_inputs(student.normalize_advantages, "normalize_advantages", advantages)
+    check_array(normalized, "normalize_advantages", (12,))
+    mean = sum(normalized) / 12
+    std = np.sqrt(sum((x - mean) ** 2 for x in normalized) / 12)
+    assert abs(mean) < 1e-9, f"normalize_advantages: the mean should be 0, not {mean:.3g} (subtract the mean)"
+    assert abs(std - 1.0) < 1e-6, f"normalize_advantages: the standard deviation should be 1, not {std:.6g}"
+    assert np.all(np.argsort(normalized) == np.argsort(advantages)), "normalize_advantages: the order must not change"
+
+
+def test_normalize_advantages_ignores_shift_and_scale(student, rng):
+    advantages = rng.normal(size=8)
+    check_close(
+        student.normalize_advantages(4.0 * advantages + 7.0),
+        student.normalize_advantages(advantages),
+        "normalize_advantages",
+        "the result for 4Â + 7 (it should equal the result for Â)",
+        1e-6,
+        1e-7,
+    )
+
+
+def test_normalize_advantages_edge_cases(student):
+    single = student.normalize_advantages(np.array([2.5]))
+    check_array(single, "normalize_advantages", (1,), "the result for a single sample")
+    check_close(single, [2.5], "normalize_advantages", "a single sample (it should be returned unchanged)")
+    equal = student.normalize_advantages(np.full(5, 3.0))
+    check_array(equal, "normalize_advantages", (5,), "the result for equal advantages (no NaN: add 1e-8 to std)")
+    check_close(equal, np.zeros(5), "normalize_advantages", "equal advantages (they should become zeros)")

@@ -1,0 +1,56 @@
+"""Grading chapter 4: the ratio from log-probabilities, and L^CPI against its sum and finite differences."""
+
+import _harness
+import numpy as np
+import pytest
+from _harness import call_checking_inputs, check_array, check_close, check_scalar, numerical_gradient
+
+student = _harness.student  # the fixture: the implementation under test (see _harness.py)
+pytest_generate_tests = _harness.pytest_generate_tests  # one run per wrong variant under MINIPPO_IMPL=wrong
+rng = _harness.rng  # a seeded NumPy Generator
+
+pytestmark = pytest.mark.timeout(10)
+
+
+@pytest.fixture
+def batch(rng):
+    logp_old = rng.normal(-2.0, 0.5, 10)
+    ratios = np.array([0.3, 0.6, 0.9, 1.0, 1.1, 1.5, 2.2, 0.75, 1.3, 3.0])
+    return np.log(ratios) + logp_old, logp_old, rng.normal(size=10), ratios
+
+
+def test_importance_ratio_is_the_probability_ratio(student, batch):
+    logp, logp_old, _, _ = batch
+    ratio = call_checking_inputs(student.importance_ratio, "importance_ratio", logp, logp_old)
+    check_array(ratio, "importance_ratio", (10,))
+    check_close(ratio, np.exp(logp) / np.exp(logp_old), "importance_ratio", "r = π_θ / π_θold")
+
+
+def test_importance_ratio_with_very_negative_log_probs(student):
+    ratio = student.importance_ratio(np.array([-800.0, -1500.0, -2.0]), np.array([-801.0, -1500.0, -2.0]))
+    check_array(ratio, "importance_ratio", (3,), "the ratio when exp(log π) underflows (use exp of the difference)")
+    check_close(ratio, [np.e, 1.0, 1.0], "importance_ratio", "the ratio for log-probabilities near −800")
+
+
+@pytest.mark.parametrize("n", [1, 10])
+def test_cpi_objective_value_and_gradient(student, batch, n):
+    logp, logp_old, advantages, ratios = (x[:n] for x in batch)
+    value, grad = call_checking_inputs(student.cpi_objective, "cpi_objective", logp, logp_old, advantages)
+    expected_value = sum(r * a for r, a in zip(ratios, advantages)) / n
+    check_close(check_scalar(value, "cpi_objective"), expected_value, "cpi_objective", "the value Ê[r Â]")
+    check_array(grad, "cpi_objective", (n,), "the gradient")
+    expected = numerical_gradient(lambda: float(student.cpi_objective(logp, logp_old, advantages)[0]), logp)
+    check_close(grad, expected, "cpi_objective", "∂L/∂ log π (checked by finite differences of the value)")
+    check_close(grad, ratios * advantages / n, "cpi_objective", "∂L/∂ log π (it should be r_t Â_t / n)")
+
+
+def test_cpi_gradient_at_the_snapshot_is_the_policy_gradient(student, batch):
+    _, logp_old, advantages, _ = batch
+    _, grad = student.cpi_objective(logp_old, logp_old, advantages)
+    check_close(grad, advantages / 10, "cpi_objective", "the gradient at θ = θ_old (it should be Â_t / n, like L^PG)")
+
+
+def test_cpi_objective_with_very_negative_log_probs(student):
+    value, grad = student.cpi_objective(np.array([-900.0, -901.0]), np.array([-901.0, -900.0]), np.array([1.0, 2.0]))
+    check_close(check_scalar(value, "cpi_objective"), (np.e + 2 / np.e) / 2, "cpi_objective", "the value near −900")
+    check_array(grad, "cpi_objective", (2,), "the gradient for log-probabilities near −900")

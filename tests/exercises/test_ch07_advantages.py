@@ -1,0 +1,182 @@
+"""Grading chapter 7: returns, TD residuals and GAE against brute-force sums over episodes, with episode ends inside
+the batch, terminated versus truncated steps, a truncated final step, several environments and one-step batches."""
+
+import _harness
+import numpy as np
+import pytest
+from _harness import call_checking_inputs, check_array, check_close
+
+student = _harness.student  # the fixture: the implementation under test (see _harness.py)
+pytest_generate_tests = _harness.pytest_generate_tests  # one run per wrong variant under MINIPPO_IMPL=wrong
+rng = _harness.rng  # a seeded NumPy Generator
+
+pytestmark = pytest.mark.timeout(10)
+GAMMA = 0.9
+
+
+def random_batch(rng, T=24, truncate_last=False):
+    """One environment, T steps: episodes end by termination at steps 5 and 17 and by truncation at step 11."""
+    rewards, values = rng.normal(size=T), rng.normal(size=T)
+    next_values = np.append(values[1:], rng.normal())
+    terminated, truncated = np.zeros(T, bool), np.zeros(T, bool)
+    terminated[[5, 17]] = True
+    truncated[11] = True
+    next_values[11] = rng.normal()  # V of the truncated episode's final observation, not of the next episode's start
+    next_values[[5, 17]] = 1e6  # after a termination there is no next state: this number must not be used
+    if truncate_last:
+        truncated[-1] = True
+    return rewards, values, next_values, terminated, truncated
+
+
+def episode_end(t, terminated, truncated):
+    """The last step of t's episode inside the batch."""
+    while t < len(terminated) - 1 and not (terminated[t] or truncated[t]):
+        t += 1
+    return t
+
+
+def brute_force_returns(rewards, next_values, terminated, truncated, gamma):
+    returns = np.zeros(len(rewards))
+    for t in range(len(rewards)):
+        end = episode_end(t, terminated, truncated)
+        returns[t] = sum(gamma ** (k - t) * rewards[k] for k in range(t, end + 1))
+        if not terminated[end]:  # cut by a time limit or by the end of the batch: bootstrap
+            returns[t] += gamma ** (end - t + 1) * next_values[end]
+    return returns
+
+
+def brute_force_deltas(rewards, values, next_values, terminated, gamma):
+    return np.array(
+        [r + (0.0 if d else gamma * nv) - v for r, v, nv, d in zip(rewards, values, next_values, terminated)]
+    )
+
+
+def brute_force_gae(rewards, values, next_values, terminated, truncated, gamma, lam):
+    deltas = brute_force_deltas(rewards, values, next_values, terminated, gamma)
+    advantages = np.zeros(len(rewards))
+    for t in range(len(rewards)):
+        end = episode_end(t, terminated, truncated)
+        advantages[t] = sum((gamma * lam) ** (k - t) * deltas[k] for k in range(t, end + 1))
+    return advantages
+
+
+# discounted returns
+
+
+@pytest.mark.parametrize("truncate_last", [False, True], ids=["horizon-cut", "truncated-final-step"])
+def test_returns_match_the_sum_over_each_episode(student, rng, truncate_last):
+    rewards, _, next_values, terminated, truncated = random_batch(rng, truncate_last=truncate_last)
+    returns = call_checking_inputs(
+        student.discounted_returns, "discounted_returns", rewards, next_values, terminated, truncated, GAMMA
+    )
+    check_array(returns, "discounted_returns", (24,))
+    expected = brute_force_returns(rewards, next_values, terminated, truncated, GAMMA)
+    check_close(
+        returns,
+        expected,
+        "discounted_returns",
+        "G_t (summed to the end of each episode, bootstrapped where "
+        "it was truncated or the batch ends, not after a termination)",
+    )
+
+
+def test_returns_of_a_one_step_batch(student):
+    no = np.zeros(1, bool)
+    returns = student.discounted_returns(np.array([2.0]), np.array([10.0]), no, no, GAMMA)
+    check_close(returns, [2.0 + GAMMA * 10.0], "discounted_returns", "G for one step cut by the horizon (r + γ V)")
+    ended = student.discounted_returns(np.array([2.0]), np.array([10.0]), np.ones(1, bool), no, GAMMA)
+    check_close(ended, [2.0], "discounted_returns", "G for one step that terminated (just r)")
+
+
+# TD residuals
+
+
+def test_td_residuals_match_the_definition(student, rng):
+    rewards, values, next_values, terminated, _ = random_batch(rng)
+    deltas = call_checking_inputs(student.td_residuals, "td_residuals", rewards, values, next_values, terminated, GAMMA)
+    check_array(deltas, "td_residuals", (24,))
+    expected = brute_force_deltas(rewards, values, next_values, terminated, GAMMA)
+    check_close(
+        deltas, expected, "td_residuals", "δ_t = r_t + γ V(s_{t+1}) − V(s_t), with V(s_{t+1}) = 0 after a termination"
+    )
+
+
+def test_a_perfect_value_function_has_zero_td_residuals(student, rng):
+    rewards, _, next_values, terminated, truncated = random_batch(rng)
+    # V(s_t) equal to the (bootstrapped) return: then r_t + γ V(s_{t+1}) = V(s_t) at every step
+    values = brute_force_returns(rewards, next_values, terminated, truncated, GAMMA)
+    next_values = next_values.copy()
+    inside = ~(terminated | truncated)
+    inside[-1] = False
+    next_values[:-1][inside[:-1]] = values[1:][inside[:-1]]
+    deltas = student.td_residuals(rewards, values, next_values, terminated, GAMMA)
+    check_close(
+        deltas, np.zeros(24), "td_residuals", "δ for an exact value function (it should be 0 everywhere)", atol=1e-9
+    )
+
+
+# GAE
+
+
+@pytest.mark.parametrize("lam", [0.0, 0.5, 0.95, 1.0])
+def test_gae_matches_the_sum_over_each_episode(student, rng, lam):
+    batch = random_batch(rng)
+    advantages = call_checking_inputs(student.gae, "gae", *batch, GAMMA, lam)
+    check_array(advantages, "gae", (24,))
+    expected = brute_force_gae(*batch, GAMMA, lam)
+    check_close(
+        advantages, expected, "gae", f"Â_t for λ = {lam} (Σ (γλ)^l δ_(t+l), stopping at the end of t's episode)"
+    )
+
+
+def test_gae_with_lambda_one_is_return_minus_value(student, rng):
+    rewards, values, next_values, terminated, truncated = random_batch(rng, truncate_last=True)
+    advantages = student.gae(rewards, values, next_values, terminated, truncated, GAMMA, 1.0)
+    expected = brute_force_returns(rewards, next_values, terminated, truncated, GAMMA) - values
+    check_close(advantages, expected, "gae", "Â for λ = 1 (it should be the discounted return minus V(s_t))")
+
+
+def test_gae_does_not_flow_across_episode_ends(student, rng):
+    rewards, values, next_values, terminated, truncated = random_batch(rng)
+    before = student.gae(rewards, values, next_values, terminated, truncated, GAMMA, 0.95)
+    changed = rewards.copy()
+    changed[12:] += 100.0  # only the episodes after the truncation at step 11
+    after = student.gae(changed, values, next_values, terminated, truncated, GAMMA, 0.95)
+    check_close(
+        after[:12],
+        before[:12],
+        "gae",
+        "Â before an episode end, after rewards of the next episode changed "
+        "(nothing may flow back across a termination or a truncation)",
+    )
+
+
+def test_gae_bootstraps_a_truncated_final_step(student):
+    no = np.zeros(3, bool)
+    truncated = np.array([False, False, True])
+    advantages = student.gae(np.ones(3), np.zeros(3), np.array([0.0, 0.0, 5.0]), no, truncated, 0.5, 1.0)
+    check_close(
+        advantages,
+        [1.75 + 0.625, 1.5 + 1.25, 1.0 + 2.5],
+        "gae",
+        "Â for a batch whose last step was truncated (bootstrap from V of the final observation)",
+    )
+
+
+def test_gae_for_several_environments(student, rng):
+    columns = [[np.roll(x, 4 * i) for x in random_batch(rng)] for i in range(3)]  # episode ends at other steps
+    stacked = [np.stack([c[i] for c in columns], axis=1) for i in range(5)]
+    stacked[3][2, 1] = True  # a termination in one environment only
+    stacked[2][2, 1] = 1e6
+    advantages = call_checking_inputs(student.gae, "gae", *stacked, GAMMA, 0.95)
+    check_array(advantages, "gae", (24, 3), "Â for a batch of shape (T, N) = (24, 3)")
+    for i in range(3):
+        expected = brute_force_gae(*(x[:, i] for x in stacked), GAMMA, 0.95)
+        check_close(advantages[:, i], expected, "gae", f"Â of environment {i} in a (T, N) batch")
+
+
+def test_gae_of_a_one_step_batch(student):
+    no = np.zeros(1, bool)
+    advantages = student.gae(np.array([1.0]), np.array([0.5]), np.array([2.0]), no, no, GAMMA, 0.95)
+    check_array(advantages, "gae", (1,), "Â for a batch of one step")
+    check_close(advantages, [1.0 + GAMMA * 2.0 - 0.5], "gae", "Â for a batch of one step (it is δ_0)")

@@ -1,0 +1,145 @@
+"""Grading chapter 8: the value loss (plain and clipped) and L^{CLIP+VF+S} against direct sums, finite differences
+and the signs each term must have."""
+
+import _harness
+import numpy as np
+import pytest
+from _harness import call_checking_inputs, check_array, check_close, check_scalar, numerical_gradient
+
+student = _harness.student  # the fixture: the implementation under test (see _harness.py)
+pytest_generate_tests = _harness.pytest_generate_tests  # one run per wrong variant under MINIPPO_IMPL=wrong
+rng = _harness.rng  # a seeded NumPy Generator
+
+pytestmark = pytest.mark.timeout(10)
+
+
+@pytest.mark.parametrize("n", [1, 7])
+def test_value_loss_value_and_gradient(student, rng, n):
+    values, targets = rng.normal(size=n), rng.normal(size=n)
+    loss, grad = call_checking_inputs(student.value_loss, "value_loss", values, targets)
+    expected = sum(0.5 * (v - g) ** 2 for v, g in zip(values, targets)) / n
+    check_close(check_scalar(loss, "value_loss"), expected, "value_loss", "the loss ½ Ê[(V − V^targ)²]")
+    check_array(grad, "value_loss", (n,), "the gradient")
+    numeric = numerical_gradient(lambda: float(student.value_loss(values, targets)[0]), values)
+    check_close(grad, numeric, "value_loss", "∂L^VF/∂V (checked by finite differences; it should be (V − V^targ)/n)")
+
+
+def reference_clipped_value_loss(values, targets, values_old, epsilon):
+    total = 0.0
+    for v, g, old in zip(values, targets, values_old):
+        clipped = old + min(max(v - old, -epsilon), epsilon)
+        total += 0.5 * max((v - g) ** 2, (clipped - g) ** 2)
+    return total / len(values)
+
+
+@pytest.fixture
+def value_batch(rng):
+    # V moved by 0.05 … 0.9 from V_old, in both directions; ε = 0.2 with no sample near the edges of the band
+    values_old = rng.normal(size=12)
+    moves = np.array([0.05, -0.1, 0.15, -0.05, 0.5, -0.6, 0.9, -0.3, 0.35, -0.45, 0.12, -0.7])
+    targets = values_old + rng.normal(0, 0.6, 12)
+    return values_old + moves, targets, values_old
+
+
+def test_clipped_value_loss_value_and_gradient(student, value_batch):
+    values, targets, values_old = value_batch
+    loss, grad = call_checking_inputs(
+        student.clipped_value_loss, "clipped_value_loss", values, targets, values_old, 0.2
+    )
+    expected = reference_clipped_value_loss(values, targets, values_old, 0.2)
+    check_close(
+        check_scalar(loss, "clipped_value_loss"),
+        expected,
+        "clipped_value_loss",
+        "the loss ½ Ê[max((V − V^targ)², (V^clip − V^targ)²)]",
+    )
+    check_array(grad, "clipped_value_loss", (12,), "the gradient")
+    numeric = numerical_gradient(lambda: reference_clipped_value_loss(values, targets, values_old, 0.2), values)
+    check_close(grad, numeric, "clipped_value_loss", "∂L/∂V (checked by finite differences)")
+
+
+def test_clipped_value_loss_is_never_below_the_plain_loss(student, value_batch):
+    values, targets, values_old = value_batch
+    clipped, _ = student.clipped_value_loss(values, targets, values_old, 0.2)
+    plain = 0.5 * float(np.mean((values - targets) ** 2))
+    assert check_scalar(clipped, "clipped_value_loss") >= plain - 1e-12, (
+        f"clipped_value_loss: the clipped loss takes the larger error, so it is never below ½ Ê[(V − V^targ)²] = "
+        f"{plain:.6g}, but it is {clipped:.6g}"
+    )
+
+
+def test_clipped_value_loss_inside_the_band_is_the_plain_loss(student, rng):
+    values_old, targets = rng.normal(size=6), rng.normal(size=6)
+    values = values_old + rng.uniform(-0.15, 0.15, 6)
+    loss, grad = student.clipped_value_loss(values, targets, values_old, 0.2)
+    check_close(
+        check_scalar(loss, "clipped_value_loss"),
+        0.5 * np.mean((values - targets) ** 2),
+        "clipped_value_loss",
+        "the loss when every V is within ε of V_old (it is the plain loss)",
+    )
+    check_close(grad, (values - targets) / 6, "clipped_value_loss", "the gradient within the band ((V − V^targ)/n)")
+
+
+def reference_objective(logp, logp_old, advantages, values, targets, entropy, epsilon, c1, c2):
+    ratio = np.exp(logp - logp_old)
+    clip_term = np.mean(np.minimum(ratio * advantages, np.clip(ratio, 1 - epsilon, 1 + epsilon) * advantages))
+    return clip_term - c1 * 0.5 * np.mean((values - targets) ** 2) + c2 * np.mean(entropy)
+
+
+@pytest.fixture
+def objective_batch(rng):
+    n = 9
+    logp_old = rng.normal(-1.2, 0.4, n)
+    ratios = np.array([0.5, 0.7, 0.9, 1.0, 1.1, 1.3, 1.6, 0.95, 1.05])
+    return (
+        np.log(ratios) + logp_old,
+        logp_old,
+        rng.normal(size=n),
+        rng.normal(size=n),
+        rng.normal(size=n),
+        rng.uniform(0.1, 1.0, n),
+    )
+
+
+@pytest.mark.parametrize("c1, c2", [(0.5, 0.01), (1.0, 0.0), (2.0, 0.5)])
+def test_clip_vf_s_objective_value_and_gradients(student, objective_batch, c1, c2):
+    logp, logp_old, advantages, values, targets, entropy = objective_batch
+    args = (logp, logp_old, advantages, values, targets, entropy, 0.2, c1, c2)
+    value, grad_logp, grad_values, grad_entropy = call_checking_inputs(
+        student.clip_vf_s_objective, "clip_vf_s_objective", *args
+    )
+    check_close(
+        check_scalar(value, "clip_vf_s_objective"),
+        reference_objective(*args),
+        "clip_vf_s_objective",
+        f"the value L^CLIP − c1 L^VF + c2 S (c1 = {c1}, c2 = {c2})",
+    )
+    for grad, variable, what in [
+        (grad_logp, logp, "∂L/∂ log π"),
+        (grad_values, values, "∂L/∂V"),
+        (grad_entropy, entropy, "∂L/∂S"),
+    ]:
+        check_array(grad, "clip_vf_s_objective", (9,), what)
+        check_close(
+            grad,
+            numerical_gradient(lambda: float(reference_objective(*args)), variable, 1e-7),
+            "clip_vf_s_objective",
+            f"{what} (checked by finite differences, c1 = {c1}, c2 = {c2})",
+        )
+
+
+def test_clip_vf_s_objective_signs(student):
+    # a better value fit and a more random policy must both raise the objective
+    logp = np.zeros(2)
+    base = student.clip_vf_s_objective(logp, logp, np.ones(2), np.zeros(2), np.ones(2), np.full(2, 0.5), 0.2, 0.5, 0.1)
+    closer = student.clip_vf_s_objective(
+        logp, logp, np.ones(2), np.full(2, 0.5), np.ones(2), np.full(2, 0.5), 0.2, 0.5, 0.1
+    )
+    wider = student.clip_vf_s_objective(logp, logp, np.ones(2), np.zeros(2), np.ones(2), np.full(2, 0.9), 0.2, 0.5, 0.1)
+    assert check_scalar(closer[0], "clip_vf_s_objective") > check_scalar(base[0], "clip_vf_s_objective"), (
+        "clip_vf_s_objective: moving V toward V^targ should raise the objective (the value loss enters with −c1)"
+    )
+    assert check_scalar(wider[0], "clip_vf_s_objective") > check_scalar(base[0], "clip_vf_s_objective"), (
+        "clip_vf_s_objective: a higher entropy should raise the objective (the bonus enters with +c2)"
+    )

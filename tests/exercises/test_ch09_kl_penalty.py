@@ -1,0 +1,130 @@
+"""Grading chapter 9: the KL between two categoricals (brute force, Monte Carlo, finite differences), the penalised
+surrogate, and eq. 8's rule for β case by case, including its boundaries."""
+
+import _harness
+import numpy as np
+import pytest
+from _harness import call_checking_inputs, check_array, check_close, check_scalar, numerical_gradient
+
+student = _harness.student  # the fixture: the implementation under test (see _harness.py)
+pytest_generate_tests = _harness.pytest_generate_tests  # one run per wrong variant under MINIPPO_IMPL=wrong
+rng = _harness.rng  # a seeded NumPy Generator
+
+pytestmark = pytest.mark.timeout(10)
+
+
+def softmax(logits):
+    e = np.exp(logits - logits.max(axis=-1, keepdims=True))
+    return e / e.sum(axis=-1, keepdims=True)
+
+
+def reference_kl(logits_old, logits):
+    p, q = softmax(logits_old), softmax(logits)
+    return np.array([sum(pj * np.log(pj / qj) for pj, qj in zip(prow, qrow)) for prow, qrow in zip(p, q)])
+
+
+@pytest.fixture
+def pair(rng):
+    return rng.normal(0, 1.0, (6, 4)), rng.normal(0, 1.0, (6, 4))
+
+
+def test_categorical_kl_matches_the_sum(student, pair):
+    logits_old, logits = pair
+    kl = call_checking_inputs(student.categorical_kl, "categorical_kl", logits_old, logits)
+    check_array(kl, "categorical_kl", (6,))
+    check_close(
+        kl,
+        reference_kl(logits_old, logits),
+        "categorical_kl",
+        "KL[π_old ‖ π] = Σ π_old (log π_old − log π) (the old policy comes first)",
+    )
+
+
+def test_categorical_kl_matches_monte_carlo(student, rng):
+    logits_old, logits = np.array([[2.0, 0.0, -1.0]]), np.array([[0.0, 1.0, 0.5]])
+    kl = check_scalar(student.categorical_kl(logits_old, logits)[0], "categorical_kl")
+    p, q = softmax(logits_old)[0], softmax(logits)[0]
+    actions = rng.choice(3, size=200_000, p=p)  # samples of the old policy, as in a rollout
+    estimate = float(np.mean(np.log(p[actions]) - np.log(q[actions])))
+    assert abs(kl - estimate) < 0.01, (
+        f"categorical_kl: sampling actions from π_old gives E[log π_old − log π] ≈ {estimate:.4f}, but the KL "
+        f"returned is {kl:.4f}"
+    )
+
+
+def test_categorical_kl_is_zero_only_for_equal_policies(student, pair):
+    logits_old, logits = pair
+    same = student.categorical_kl(logits_old, logits_old + 3.0)  # adding a constant leaves the softmax unchanged
+    check_close(same, np.zeros(6), "categorical_kl", "KL between a policy and itself (it should be 0)", atol=1e-12)
+    kl = student.categorical_kl(logits_old, logits)
+    assert np.all(kl > 0), "categorical_kl: the KL between two different policies should be positive"
+
+
+def test_categorical_kl_survives_extreme_logits(student):
+    logits_old = np.array([[1000.0, 0.0, -1000.0], [0.0, 0.0, 0.0]])
+    logits = np.array([[0.0, 1000.0, 0.0], [0.0, 0.0, 0.0]])
+    kl = student.categorical_kl(logits_old, logits)
+    check_array(kl, "categorical_kl", (2,), "the KL for logits of ±1000 (work with log-softmax, not log of softmax)")
+    check_close(kl, [1000.0, 0.0], "categorical_kl", "the KL for logits of ±1000")
+
+
+def test_categorical_kl_backward_matches_finite_differences(student, pair, rng):
+    logits_old, logits = pair
+    grad_kl = rng.normal(size=6)
+    grad = call_checking_inputs(student.categorical_kl_backward, "categorical_kl_backward", logits_old, logits, grad_kl)
+    check_array(grad, "categorical_kl_backward", (6, 4))
+    numeric = numerical_gradient(lambda: float(grad_kl @ reference_kl(logits_old, logits)), logits)
+    check_close(
+        grad, numeric, "categorical_kl_backward", "∂L/∂z of the new logits (checked by finite differences)", 1e-5, 1e-7
+    )
+
+
+@pytest.mark.parametrize("n", [1, 8])
+def test_kl_penalty_objective_value_and_gradients(student, rng, n):
+    logp_old = rng.normal(-1.0, 0.5, n)
+    logp = logp_old + rng.normal(0, 0.3, n)
+    advantages, kl, beta = rng.normal(size=n), rng.uniform(0, 0.05, n), 3.0
+
+    def reference():
+        return float(np.mean(np.exp(logp - logp_old) * advantages - beta * kl))
+
+    value, grad_logp, grad_kl = call_checking_inputs(
+        student.kl_penalty_objective, "kl_penalty_objective", logp, logp_old, advantages, kl, beta
+    )
+    check_close(
+        check_scalar(value, "kl_penalty_objective"), reference(), "kl_penalty_objective", "the value Ê[r Â − β KL]"
+    )
+    check_array(grad_logp, "kl_penalty_objective", (n,), "∂L/∂ log π")
+    check_array(grad_kl, "kl_penalty_objective", (n,), "∂L/∂KL")
+    check_close(
+        grad_logp, numerical_gradient(reference, logp), "kl_penalty_objective", "∂L/∂ log π (finite differences)"
+    )
+    check_close(grad_kl, numerical_gradient(reference, kl), "kl_penalty_objective", "∂L/∂KL (it should be −β/n)")
+
+
+@pytest.mark.parametrize(
+    "kl, expected, why",
+    [
+        (0.5, 0.5, "d < d_targ/1.5: β is halved"),
+        (1.99, 0.5, "d just below d_targ/1.5: β is halved"),
+        (2.0, 1.0, "d exactly d_targ/1.5: β stays"),
+        (3.0, 1.0, "d = d_targ: β stays"),
+        (4.5, 1.0, "d exactly 1.5·d_targ: β stays"),
+        (4.51, 2.0, "d just above 1.5·d_targ: β is doubled"),
+        (30.0, 2.0, "d > 1.5·d_targ: β is doubled, once"),
+    ],
+)
+def test_adaptive_beta_rule(student, kl, expected, why):
+    # d_targ = 3 makes the thresholds d_targ/1.5 = 2 and 1.5·d_targ = 4.5 exact in floating point
+    beta = check_scalar(student.adaptive_beta(1.0, kl, 3.0), "adaptive_beta", "the new β")
+    assert beta == pytest.approx(expected), (
+        f"adaptive_beta: with d = {kl} and d_targ = 3 ({why}), β = 1 should become {expected}, not {beta:.6g}"
+    )
+
+
+def test_adaptive_beta_scales_the_current_beta(student):
+    for beta, kl, expected in [(0.4, 0.001, 0.2), (0.4, 0.1, 0.8), (0.4, 0.01, 0.4), (7.0, 0.0, 3.5)]:
+        new = check_scalar(student.adaptive_beta(beta, kl, 0.01), "adaptive_beta", "the new β")
+        assert new == pytest.approx(expected), (
+            f"adaptive_beta: with β = {beta}, d = {kl} and d_targ = 0.01, the new β should be {expected}, not {new:.6g}"
+        )
