@@ -37,10 +37,16 @@ def spaces_of(env: gym.Env) -> tuple[int, str, int]:
     )
 
 
-def make_env(env_id: str, render_mode: str | None = None) -> gym.Env:
+def make_env(env_id: str, render_mode: str | None = None, size: int | None = None) -> gym.Env:
+    """Make ``env_id`` (checking its spaces); ``size`` sets a MuJoCo task's rendered frame to size × size pixels."""
     check_env_id(env_id)
     try:
         extra = {} if render_mode is None else {"render_mode": render_mode}
+        if size is not None and "mujoco" in str(gym.spec(env_id).entry_point):
+            # a camera that follows the robot's root body, so a walker stays in the picture
+            camera = {"type": 2, "trackbodyid": 1, "distance": 3.5, "elevation": -15.0,
+                      "lookat": np.array([0.0, 0.0, 1.0])}
+            extra.update(width=size, height=size, default_camera_config=camera)
         env = gym.make(env_id, disable_env_checker=True, **extra)
     except Exception as error:  # a missing extra (e.g. mujoco) or a broken registration
         reason = str(error).splitlines()[0] if str(error) else type(error).__name__

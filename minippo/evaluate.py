@@ -11,7 +11,8 @@ from minippo.envs import make_env
 from minippo.errors import MinippoError
 
 
-def evaluate(run_dir, episodes: int = 10, seed: int = 0, gif=None, max_frames: int = 600, frame_skip: int = 2):
+def evaluate(run_dir, episodes: int = 10, seed: int = 0, gif=None, max_frames: int = 300, frame_skip: int = 2,
+             size: int = 320):
     """Return the list of episode returns of the policy saved in ``run_dir`` (or a policy.npz path)."""
     path = Path(run_dir)
     if path.is_dir():
@@ -19,7 +20,7 @@ def evaluate(run_dir, episodes: int = 10, seed: int = 0, gif=None, max_frames: i
     if episodes < 1:
         raise MinippoError(f"--episodes must be at least 1, not {episodes}")
     agent, normalizer, meta = load_policy(path)
-    env = make_env(meta["env_id"], render_mode="rgb_array" if gif else None)
+    env = make_env(meta["env_id"], render_mode="rgb_array" if gif else None, size=size if gif else None)
     frames, returns = [], []
     for episode in range(episodes):
         obs, _ = env.reset(seed=seed + episode)
@@ -46,5 +47,8 @@ def write_gif(frames, path, fps: int = 25) -> None:
 
     if not frames:
         raise MinippoError("nothing was rendered, so no GIF was written")
-    images = [Image.fromarray(np.asarray(frame)) for frame in frames]
-    images[0].save(path, save_all=True, append_images=images[1:], duration=int(1000 / max(fps, 1)), loop=0)
+    # one shared palette keeps the file small and the encoding fast
+    first = Image.fromarray(np.asarray(frames[0])).quantize(colors=128, method=Image.Quantize.MEDIANCUT)
+    images = [Image.fromarray(np.asarray(frame)).quantize(palette=first, dither=Image.Dither.NONE) for frame in frames]
+    duration = int(1000 / max(fps, 1))
+    images[0].save(path, save_all=True, append_images=images[1:], optimize=False, duration=duration, loop=0)
