@@ -1,0 +1,341 @@
+"""The corridor explorer in the built book, driven in headless Chromium the way a reader would use it.
+
+The built HTML (tests/conftest.py's ``built_book``) is served from 127.0.0.1 on a free port. Each test loads the
+page, uses the explorer's own controls (buttons, radio buttons, sliders moved with the keyboard) and reads what
+is on the screen: the trust-region light, the status line, the band, the event log. Any JavaScript error or other
+SEVERE console message fails the test. Without Chromium, chromedriver or selenium the tests are skipped, except
+under CI=true, where they fail: the explorer must be checked in CI.
+
+To try the explorer on other built HTML without building the book, point MINIPPO_EXPLORER_HTML at its directory.
+"""
+
+from __future__ import annotations
+
+import functools
+import http.server
+import os
+import re
+import shutil
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from minippo import corridor as cd
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMEDRIVER = Path("/usr/bin/chromedriver")
+PAGE = "05-clipping.html"
+
+
+def missing(reason: str):
+    if os.environ.get("CI") == "true":
+        pytest.fail(f"the explorer's browser test cannot run in CI: {reason}")
+    pytest.skip(reason)
+
+
+@pytest.fixture(scope="module")
+def html_dir(request) -> Path:
+    override = os.environ.get("MINIPPO_EXPLORER_HTML")
+    if override:
+        return Path(override)
+    return request.getfixturevalue("built_book")
+
+
+def explorer_page(html_dir: Path) -> str:
+    """Chapter 5's page, or else the first page of the book that embeds an explorer."""
+    preferred = html_dir / PAGE
+    candidates = [preferred] if preferred.exists() else []
+    candidates += sorted(p for p in html_dir.glob("*.html") if p != preferred)
+    for page in candidates:
+        if 'class="corridor-explorer"' in page.read_text(encoding="utf-8", errors="replace"):
+            return page.name
+    pytest.fail(f'no page of the built book in {html_dir} embeds <div class="corridor-explorer">')
+
+
+class _Handler(http.server.SimpleHTTPRequestHandler):
+    def do_GET(self):  # noqa: N802 (the name http.server calls)
+        if self.path.split("?")[0] == "/favicon.ico" and not (Path(self.directory) / "favicon.ico").exists():
+            self.send_response(204)  # the browser asks for an icon by itself; a 404 would be logged as SEVERE
+            self.end_headers()
+            return
+        super().do_GET()
+
+    def log_message(self, *args):
+        pass
+
+
+@pytest.fixture(scope="module")
+def site(html_dir):
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), functools.partial(_Handler, directory=str(html_dir)))
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        yield f"http://127.0.0.1:{server.server_port}/{explorer_page(html_dir)}"
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+@pytest.fixture(scope="module")
+def browser():
+    if not CHROMIUM.exists() or not CHROMEDRIVER.exists():
+        missing(f"{CHROMIUM} or {CHROMEDRIVER} is not installed (apt-get install chromium chromium-driver)")
+    try:
+        from selenium import webdriver
+        from selenium.webdriver.chrome.service import Service
+    except ImportError:
+        missing("selenium is not installed (pip install -e '.[browser]')")
+    profile = tempfile.mkdtemp(prefix="minippo-chromium-")
+    options = webdriver.ChromeOptions()
+    options.binary_location = str(CHROMIUM)
+    for flag in (
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-dev-shm-usage",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--no-first-run",
+        "--disable-sync",
+        f"--user-data-dir={profile}",
+        "--window-size=1100,1600",
+    ):
+        options.add_argument(flag)
+    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    driver = webdriver.Chrome(service=Service(str(CHROMEDRIVER)), options=options)
+    try:
+        yield driver
+    finally:
+        driver.quit()
+        shutil.rmtree(profile, ignore_errors=True)
+
+
+def severe_messages(driver):
+    return [entry["message"] for entry in driver.get_log("browser") if entry["level"] == "SEVERE"]
+
+
+class Reader:
+    """What a reader sees of, and does to, the first explorer on the page."""
+
+    def __init__(self, driver, url):
+        from selenium.webdriver.common.by import By
+
+        self.By = By
+        self.driver = driver
+        driver.get(url)
+        deadline = time.time() + 20
+        while time.time() < deadline:
+            roots = driver.find_elements(By.CSS_SELECTOR, "div.corridor-explorer")
+            if roots and roots[0].get_attribute("data-ready") == "true":
+                break
+            time.sleep(0.05)
+        else:
+            pytest.fail("the explorer did not start on " + url + ": " + "; ".join(severe_messages(driver)))
+        self.root = roots[0]
+        self.count = len(roots)
+        driver.execute_script("arguments[0].scrollIntoView()", self.root)
+
+    def find(self, css):
+        return self.root.find_element(self.By.CSS_SELECTOR, css)
+
+    def find_all(self, css):
+        return self.root.find_elements(self.By.CSS_SELECTOR, css)
+
+    def preset(self, name):
+        self.find(f"button.ce-preset[data-preset='{name}']").click()
+
+    def fastest(self):
+        from selenium.webdriver.common.keys import Keys
+
+        self.find("input[data-setting='speed']").send_keys(Keys.END)
+
+    def play(self):
+        button = self.find("button.ce-play")
+        if button.get_attribute("aria-pressed") != "true":
+            button.click()
+
+    def pause(self):
+        button = self.find("button.ce-play")
+        if button.get_attribute("aria-pressed") == "true":
+            button.click()
+
+    def objective(self, name):
+        self.find(f"input[type='radio'][value='{name}']").click()
+
+    def screen(self):
+        """The light and the status line, read in one go (the explorer may be playing)."""
+        texts = self.driver.execute_script(
+            """
+            const root = arguments[0];
+            const text = (css) => root.querySelector(css).textContent.trim();
+            return [text('.ce-light-text'), text('.ce-value.ce-round'), text('.ce-value.ce-epoch'),
+                    text('.ce-value.ce-return'), text('.ce-value.ce-kl')];
+            """,
+            self.root,
+        )
+        light, rnd, epoch, ret, kl = texts
+        assert light in ("trust region held", "trust region broken"), light
+        match_return = re.fullmatch(r"([−\-]?\d+\.\d+) / (\d+\.\d+) optimal", ret)
+        match_kl = re.fullmatch(r"(\d+\.\d+) \(limit (\d+\.\d+)\)", kl)
+        assert match_return and match_kl, (ret, kl)
+        return {
+            "light": light.rsplit(" ", 1)[1],
+            "round": int(rnd),
+            "epoch": epoch,
+            "return": float(match_return.group(1).replace("−", "-")),
+            "optimal": float(match_return.group(2)),
+            "kl": float(match_kl.group(1)),
+            "limit": float(match_kl.group(2)),
+        }
+
+    def light(self):
+        return self.screen()["light"]
+
+    def stat(self, name):
+        return self.find(f".ce-value.ce-{name}").text
+
+    def round(self):
+        return self.screen()["round"]
+
+    def returns(self):
+        """(return, optimal) as the status line shows them."""
+        screen = self.screen()
+        return screen["return"], screen["optimal"]
+
+    def kl(self):
+        screen = self.screen()
+        return screen["kl"], screen["limit"]
+
+    def log(self):
+        return [item.text for item in self.find_all(".ce-log-list li")]
+
+    def watch(self, until, timeout=60.0, every=0.05):
+        """Samples the screen until ``until(samples)`` is true; fails after ``timeout`` seconds."""
+        samples = []
+        deadline = time.time() + timeout
+        while time.time() < deadline:
+            samples.append(self.screen())
+            if until(samples):
+                return samples
+            time.sleep(every)
+        pytest.fail(f"timed out; last samples {samples[-3:]}")
+
+
+@pytest.fixture
+def reader(browser, site):
+    severe_messages(browser)  # start each test with an empty console
+    page = Reader(browser, site)
+    yield page
+    page.pause()
+    errors = severe_messages(browser)
+    assert not errors, "console errors: " + " | ".join(errors)
+
+
+def test_the_explorer_starts_with_all_its_parts(reader):
+    assert reader.light() == "held"
+    assert reader.round() == 1 and reader.stat("epoch").startswith("0/")
+    assert len(reader.find_all("button.ce-state")) == cd.N_STATES
+    assert len(reader.find_all("button.ce-preset")) == 3
+    assert {e.get_attribute("value") for e in reader.find_all("input[type='radio']")} == set(cd.OBJECTIVES)
+    for setting in ("epsilon", "step_size", "epochs", "noise", "speed"):
+        slider = reader.find(f"input[data-setting='{setting}']")
+        label = reader.root.find_element(reader.By.CSS_SELECTOR, f"label[for='{slider.get_attribute('id')}']")
+        assert label.text.strip(), setting  # every control has a visible label
+    ret, optimal = reader.returns()
+    uniform = cd.expected_return([[0.0, 0.0]] * cd.N_STATES)
+    assert (round(ret, 3), optimal) == (round(uniform, 3), round(cd.optimal_return(), 3))
+
+
+def test_stepping_shows_the_numbers_minippo_computes(reader):
+    reader.preset("clip")
+    step = reader.find("button.ce-step")
+    for _ in range(25):
+        step.click()
+    expected = cd.run({"preset": "clip"}, ticks=25)[-1]
+    assert reader.round() == expected["round"] and reader.stat("epoch") == f"{expected['epoch']}/10"
+    assert reader.returns()[0] == pytest.approx(expected["return"], abs=6e-4)
+    assert reader.kl()[0] == pytest.approx(expected["kl"], abs=6e-4)
+    # the table shows the selected state's numbers: select s4 with the keyboard
+    from selenium.webdriver.common.keys import Keys
+
+    reader.find_all("button.ce-state")[4].send_keys(Keys.ENTER)
+    cells = [c.text for c in reader.find_all(".ce-table tbody tr")[1].find_elements(reader.By.TAG_NAME, "td")]
+    assert cells[0] == f"{round(100 * expected['probs'][4][1])}%"
+    assert float(cells[1]) == pytest.approx(expected["ratios"][4][1], abs=6e-3)
+
+
+def test_clip_preset_holds_the_light_and_the_return_rises(reader):
+    reader.preset("clip")
+    start, optimal = reader.returns()
+    reader.fastest()
+    reader.play()
+    samples = reader.watch(lambda s: s[-1]["round"] >= 30)
+    reader.pause()
+    lights = {sample["light"] for sample in samples}
+    assert lights == {"held"}, samples
+    assert not [line for line in reader.log() if "broke the band" in line]  # not even between two samples
+    ret = reader.returns()[0]
+    assert start < 0.0 < ret
+    assert ret >= 0.9 * optimal
+    by_round = {}
+    for sample in samples:
+        by_round[sample["round"]] = sample["return"]  # the last value seen in each round
+    rounds = sorted(by_round)
+    assert by_round[rounds[-1]] > by_round[rounds[len(rounds) // 3]] > by_round[rounds[0]], by_round  # rising
+
+
+def test_no_clip_preset_breaks_the_band(reader):
+    reader.preset("noclip")
+    reader.fastest()
+    reader.play()
+    broken = reader.watch(lambda s: s[-1]["light"] == "broken", timeout=30)[-1]
+    assert broken["kl"] > broken["limit"]  # the light and the numbers agree
+    assert "ce-broken" in reader.find(".ce-light").get_attribute("class")
+    reader.watch(lambda s: any("broke the band" in line for line in reader.log()), timeout=10)
+
+
+def test_switching_to_clip_mid_run_brings_the_light_back(reader):
+    reader.preset("noclip")
+    reader.fastest()
+    reader.play()
+    reader.watch(lambda s: s[-1]["light"] == "broken", timeout=30)
+    reader.pause()
+    switched_in = reader.round()
+    reader.objective("clip")
+    assert any("objective → clip" in line for line in reader.log())
+    reader.play()
+    # the snapshot refreshes at the end of the round; from the round after next on, the clip keeps the light on
+    samples = reader.watch(lambda s: s[-1]["round"] >= switched_in + 12, timeout=60)
+    reader.pause()
+    later = [sample["light"] for sample in samples if sample["round"] >= switched_in + 2]
+    assert later and set(later) == {"held"}, samples
+    broke = [line for line in reader.log() if "broke the band" in line]
+    rounds_broken = [int(re.match(r"round (\d+)", line).group(1)) for line in broke]
+    assert all(r < switched_in + 2 for r in rounds_broken), broke
+    assert reader.light() == "held"
+
+
+def test_moving_epsilon_changes_the_band(reader):
+    from selenium.webdriver.common.keys import Keys
+
+    reader.preset("clip")
+    band = reader.find("rect.ce-band")
+    width_at = {}
+    width_at[0.2] = band.size["width"]
+    assert band.get_attribute("data-low") == "0.80" and band.get_attribute("data-high") == "1.20"
+    slider = reader.find("input[data-setting='epsilon']")
+    slider.send_keys(Keys.HOME)
+    width_at[0.05] = band.size["width"]
+    assert band.get_attribute("data-low") == "0.95" and band.get_attribute("data-high") == "1.05"
+    assert reader.find("output[for='" + slider.get_attribute("id") + "']").text == "0.05"
+    assert reader.kl()[1] < 0.01
+    slider.send_keys(Keys.END)
+    width_at[0.5] = band.size["width"]
+    assert band.get_attribute("data-low") == "0.50" and band.get_attribute("data-high") == "1.50"
+    assert reader.kl()[1] == pytest.approx(0.25)
+    assert width_at[0.05] < width_at[0.2] < width_at[0.5]
+    assert width_at[0.5] == pytest.approx(10 * width_at[0.05], rel=0.05)  # the band is drawn to scale
+    assert any("ε → 0.50" in line for line in reader.log())
