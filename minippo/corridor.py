@@ -475,8 +475,11 @@ class Explorer:
             "probs": probs,
             "ratios": ratios(probs, self.snapshot),
             "advantages": [list(row) for row in self.snapshot.advantages],
-            "clipped": clipped_mask(probs, self.snapshot, epsilon),
-            "clip_fraction": clip_fraction(probs, self.snapshot, epsilon),
+            # where the clip zeroes the gradient: only under the clipped objective
+            "clipped": clipped_mask(probs, self.snapshot, epsilon)
+            if self.settings["objective"] == "clip"
+            else [[False] * N_ACTIONS for _ in range(N_STATES)],
+            "clip_fraction": clip_fraction(probs, self.snapshot, epsilon),  # outside the band, any objective
             "surrogate": value,
             "return": state_values(probs, self.settings["gamma"])[0],
             "kl": kl,

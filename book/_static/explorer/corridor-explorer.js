@@ -129,8 +129,9 @@
       ["beta", "\u03b2"],
     ]) {
       const value = el("span", { class: "ce-value ce-" + key });
-      const part = el("span", { class: "ce-stat ce-stat-" + key }, [el("span", { class: "ce-stat-label", text: label + " " }), value]);
-      this.statusParts[key] = { part: part, value: value };
+      const name = el("span", { class: "ce-stat-label", text: label + " " });
+      const part = el("span", { class: "ce-stat ce-stat-" + key }, [name, value]);
+      this.statusParts[key] = { part: part, label: name, value: value };
       this.status.appendChild(part);
     }
     root.appendChild(el("div", { class: "ce-top" }, [this.light, this.status]));
@@ -522,6 +523,8 @@
     p.kl.value.textContent = fmt(rec.kl, 3) + " (limit " + fmt(rec.kl_limit, 3) + ")";
     p.return.value.textContent = minus(fmt(rec.return, 3)) + " / " + fmt(ex.optimal, 3) + " optimal";
     p.clipped.value.textContent = percent(rec.clip_fraction);
+    const clipLabel = ex.settings.objective === "clip" ? "clipped " : "outside band ";
+    if (p.clipped.label.textContent !== clipLabel) p.clipped.label.textContent = clipLabel;
     p.beta.value.textContent = fmt(rec.beta, 3);
     p.beta.part.hidden = ex.settings.objective !== "klpen";
     this.root.setAttribute("data-round", String(ex.round));
@@ -577,7 +580,8 @@
       cells[0].textContent = percent(rec.probs[shown][a]);
       cells[1].textContent = fmt(rec.ratios[shown][a], 2);
       cells[2].textContent = minus(signed(rec.advantages[shown][a], 3));
-      cells[3].textContent = rec.clipped[shown][a] ? "yes" : "no";
+      const outside = Math.abs(rec.ratios[shown][a] - 1) > ex.settings.epsilon;
+      cells[3].textContent = rec.clipped[shown][a] ? "yes" : outside ? "no (outside band)" : "no";
     }
 
     this.renderChart();

@@ -419,7 +419,12 @@
       probs: probs,
       ratios: ratios(probs, this.snapshot),
       advantages: copyRows(this.snapshot.advantages),
-      clipped: clippedMask(probs, this.snapshot, epsilon),
+      clipped:
+        this.settings.objective === "clip"
+          ? clippedMask(probs, this.snapshot, epsilon)
+          : [0, 1, 2, 3, 4].map(function () {
+              return [false, false];
+            }),
       clip_fraction: clipFraction(probs, this.snapshot, epsilon),
       surrogate: value,
       return: stateValues(probs, this.settings.gamma)[0],
