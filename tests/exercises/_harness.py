@@ -84,6 +84,8 @@ class Student:
 def _describe(error: BaseException) -> str:
     if isinstance(error, SyntaxError):
         return f"SyntaxError on line {error.lineno}: {error.msg}"
+    if "Timeout" in str(error):
+        return "importing it took longer than the time limit (does it run an endless loop when imported?)"
     text = str(error).strip().splitlines()[0] if str(error).strip() else ""
     return f"{type(error).__name__}: {text}".rstrip(": ")
 
@@ -110,26 +112,41 @@ def wrong_variants(chapter: str) -> list[str]:
     return list(_import_file(path, f"_wrong_{chapter}").VARIANTS) if path.exists() else []
 
 
+_loaded: dict[tuple, object] = {}
+
+
 def load_student(chapter: str, impl: str, variant: str | None = None):
-    """The module under test for ``chapter``, wrapped in Student, or a Broken stand-in that fails every test."""
+    """The module under test for ``chapter``, wrapped in Student, or a Broken stand-in that fails every test.
+
+    The outcome is kept, so a module that fails to import (or hangs while importing) costs one test's time only.
+    """
+    key = (chapter, impl, variant)
+    if key not in _loaded:
+        _loaded[key] = _load(chapter, impl, variant)
+    return _loaded[key]
+
+
+def _load(chapter: str, impl: str, variant: str | None):
     if impl == "wrong":
         return Student(load_wrong_variant(chapter, variant), f"wrong variant {chapter}:{variant}")
     if impl in ("solutions", "exercises"):
         where = f"{impl}/{chapter}.py"
-        try:
-            module = importlib.import_module(f"{impl}.{chapter}")
-        except Exception as error:  # noqa: BLE001 - a syntax error in one chapter must not stop the others
-            return Broken(where, _describe(error))
-        return Student(module, where)
-    folder = Path(impl).expanduser()
-    path = folder / f"{chapter}.py"
+        path = ROOT / impl / f"{chapter}.py"
+    else:
+        path = Path(impl).expanduser() / f"{chapter}.py"
+        where = str(path)
     if not path.exists():
-        return Broken(str(path), "there is no such file")
+        return Broken(where, "there is no such file")
     try:
-        module = _import_file(path, f"_graded_{chapter}")
-    except Exception as error:  # noqa: BLE001
-        return Broken(str(path), _describe(error))
-    return Student(module, str(path))
+        if impl in ("solutions", "exercises"):
+            module = importlib.import_module(f"{impl}.{chapter}")
+        else:
+            module = _import_file(path, f"_graded_{chapter}")
+    except KeyboardInterrupt:
+        raise
+    except BaseException as error:  # noqa: BLE001 - a syntax error, sys.exit or a time-out while importing
+        return Broken(where, _describe(error))
+    return Student(module, where)
 
 
 def pytest_generate_tests(metafunc):

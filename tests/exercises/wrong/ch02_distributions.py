@@ -1,0 +1,185 @@
+"""Plausible mistakes in chapter 2: log-probabilities, entropies and their gradients."""
+
+import numpy as np
+
+LOG_2PI = float(np.log(2.0 * np.pi))
+
+
+def softmax_unshifted(logits):
+    e = np.exp(logits)
+    return e / e.sum(axis=-1, keepdims=True)
+
+
+def softmax(logits):
+    e = np.exp(logits - logits.max(axis=-1, keepdims=True))
+    return e / e.sum(axis=-1, keepdims=True)
+
+
+def categorical_log_prob_naive(logits, actions):
+    """log of softmax, without subtracting the maximum first: exp(1000) overflows."""
+    with np.errstate(all="ignore"):
+        return np.log(softmax_unshifted(logits)[np.arange(len(actions)), actions])
+
+
+def categorical_log_prob_log_of_softmax(logits, actions):
+    """Shifted softmax, then log: an action with probability below 1e-308 gets log 0 = −inf."""
+    with np.errstate(divide="ignore"):
+        return np.log(softmax(logits)[np.arange(len(actions)), actions])
+
+
+def categorical_log_prob_returns_logit(logits, actions):
+    """The logit z_a itself, forgetting the normaliser log Σ exp z."""
+    return logits[np.arange(len(actions)), actions].astype(np.float64)
+
+
+def categorical_log_prob_backward_onehot_only(logits, actions, grad_logp):
+    """Only the 1[j = a] part, forgetting −π_j."""
+    grad = np.zeros_like(logits, dtype=np.float64)
+    grad[np.arange(len(actions)), actions] = grad_logp
+    return grad
+
+
+def categorical_log_prob_backward_sign(logits, actions, grad_logp):
+    """π_j − 1[j = a]: the sign flipped."""
+    grad = softmax(logits) * grad_logp[:, None]
+    grad[np.arange(len(actions)), actions] -= grad_logp
+    return grad
+
+
+def categorical_log_prob_backward_ignores_upstream(logits, actions, grad_logp):
+    """1[j = a] − π_j without multiplying by ∂L/∂ log π."""
+    grad = -softmax(logits)
+    grad[np.arange(len(actions)), actions] += 1.0
+    return grad
+
+
+def categorical_entropy_zero_times_log_zero(logits):
+    """−Σ p log p with p from the softmax: a probability that underflows to 0 gives 0 · (−inf) = NaN."""
+    p = softmax(logits)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return -(p * np.log(p)).sum(axis=-1)
+
+
+def categorical_entropy_sign(logits):
+    """Σ p log p, the negative of the entropy."""
+    log_p = logits - logits.max(axis=-1, keepdims=True)
+    log_p = log_p - np.log(np.exp(log_p).sum(axis=-1, keepdims=True))
+    return (np.exp(log_p) * log_p).sum(axis=-1)
+
+
+def categorical_entropy_backward_without_s(logits, grad_entropy):
+    """−π_j log π_j only, forgetting the + S that the normalisation brings."""
+    p = softmax(logits)
+    return -p * np.log(p) * grad_entropy[:, None]
+
+
+def categorical_entropy_backward_wrt_probs(logits, grad_entropy):
+    """∂S/∂π_j = −(log π_j + 1), the gradient with respect to the probabilities, not the logits."""
+    p = softmax(logits)
+    return -(np.log(p) + 1.0) * grad_entropy[:, None]
+
+
+def gaussian_log_prob_no_log_std(mean, log_std, actions):
+    """Drops the −Σ log σ term."""
+    z = (actions - mean) / np.exp(log_std)
+    return -0.5 * (z * z).sum(axis=-1) - 0.5 * mean.shape[-1] * LOG_2PI
+
+
+def gaussian_log_prob_std_for_log_std(mean, log_std, actions):
+    """−Σ σ where −Σ log σ belongs."""
+    z = (actions - mean) / np.exp(log_std)
+    return -0.5 * (z * z).sum(axis=-1) - np.exp(log_std).sum() - 0.5 * mean.shape[-1] * LOG_2PI
+
+
+def gaussian_log_prob_no_constant(mean, log_std, actions):
+    """Drops the −(d/2) log 2π constant (harmless for the gradient, wrong as a log-probability)."""
+    z = (actions - mean) / np.exp(log_std)
+    return -0.5 * (z * z).sum(axis=-1) - log_std.sum()
+
+
+def gaussian_log_prob_divides_by_variance(mean, log_std, actions):
+    """(a − μ)/σ² squared, dividing by the variance where the standard deviation belongs."""
+    z = (actions - mean) / np.exp(2 * log_std)
+    return -0.5 * (z * z).sum(axis=-1) - log_std.sum() - 0.5 * mean.shape[-1] * LOG_2PI
+
+
+def gaussian_log_prob_backward_no_minus_one(mean, log_std, actions, grad_logp):
+    """∂ log π/∂ log σ = z² without the −1 that the −log σ term gives."""
+    std = np.exp(log_std)
+    z = (actions - mean) / std
+    return (z / std) * grad_logp[:, None], (z * z * grad_logp[:, None]).sum(axis=0)
+
+
+def gaussian_log_prob_backward_not_summed(mean, log_std, actions, grad_logp):
+    """∂L/∂ log σ left per sample, shape (n, d), although log σ is shared by all states."""
+    std = np.exp(log_std)
+    z = (actions - mean) / std
+    return (z / std) * grad_logp[:, None], (z * z - 1.0) * grad_logp[:, None]
+
+
+def gaussian_log_prob_backward_mean_over_std(mean, log_std, actions, grad_logp):
+    """∂ log π/∂μ = (a − μ)/σ, one σ short."""
+    std = np.exp(log_std)
+    z = (actions - mean) / std
+    return z * grad_logp[:, None], ((z * z - 1.0) * grad_logp[:, None]).sum(axis=0)
+
+
+def gaussian_entropy_without_e(mean, log_std):
+    """Σ (log σ + ½ log 2π), missing the ½ of ½ log 2πe."""
+    return np.full(mean.shape[0], float(log_std.sum() + 0.5 * mean.shape[-1] * LOG_2PI))
+
+
+def gaussian_entropy_scalar(mean, log_std):
+    """The right number, but one float instead of one per state."""
+    return float(log_std.sum() + 0.5 * mean.shape[-1] * (LOG_2PI + 1.0))
+
+
+def gaussian_entropy_of_variance(mean, log_std):
+    """Uses log σ² = 2 log σ where log σ belongs."""
+    return np.full(mean.shape[0], float(2 * log_std.sum() + 0.5 * mean.shape[-1] * (LOG_2PI + 1.0)))
+
+
+def gaussian_entropy_backward_ignores_upstream(mean, log_std, grad_entropy):
+    """∂S/∂ log σ = 1 returned as it is, not multiplied by Σ ∂L/∂S."""
+    return np.zeros_like(mean), np.ones_like(log_std)
+
+
+def gaussian_entropy_backward_mean_over_batch(mean, log_std, grad_entropy):
+    """The upstream gradients averaged instead of summed over the batch."""
+    return np.zeros_like(mean), np.full(log_std.shape, float(np.mean(grad_entropy)))
+
+
+VARIANTS = {
+    "categorical_log_prob_naive": {"categorical_log_prob": categorical_log_prob_naive},
+    "categorical_log_prob_log_of_softmax": {"categorical_log_prob": categorical_log_prob_log_of_softmax},
+    "categorical_log_prob_returns_logit": {"categorical_log_prob": categorical_log_prob_returns_logit},
+    "categorical_log_prob_backward_onehot_only": {
+        "categorical_log_prob_backward": categorical_log_prob_backward_onehot_only
+    },
+    "categorical_log_prob_backward_sign": {"categorical_log_prob_backward": categorical_log_prob_backward_sign},
+    "categorical_log_prob_backward_ignores_upstream": {
+        "categorical_log_prob_backward": categorical_log_prob_backward_ignores_upstream
+    },
+    "categorical_entropy_zero_times_log_zero": {"categorical_entropy": categorical_entropy_zero_times_log_zero},
+    "categorical_entropy_sign": {"categorical_entropy": categorical_entropy_sign},
+    "categorical_entropy_backward_without_s": {"categorical_entropy_backward": categorical_entropy_backward_without_s},
+    "categorical_entropy_backward_wrt_probs": {"categorical_entropy_backward": categorical_entropy_backward_wrt_probs},
+    "gaussian_log_prob_no_log_std": {"gaussian_log_prob": gaussian_log_prob_no_log_std},
+    "gaussian_log_prob_std_for_log_std": {"gaussian_log_prob": gaussian_log_prob_std_for_log_std},
+    "gaussian_log_prob_no_constant": {"gaussian_log_prob": gaussian_log_prob_no_constant},
+    "gaussian_log_prob_divides_by_variance": {"gaussian_log_prob": gaussian_log_prob_divides_by_variance},
+    "gaussian_log_prob_backward_no_minus_one": {"gaussian_log_prob_backward": gaussian_log_prob_backward_no_minus_one},
+    "gaussian_log_prob_backward_not_summed": {"gaussian_log_prob_backward": gaussian_log_prob_backward_not_summed},
+    "gaussian_log_prob_backward_mean_over_std": {
+        "gaussian_log_prob_backward": gaussian_log_prob_backward_mean_over_std
+    },
+    "gaussian_entropy_without_e": {"gaussian_entropy": gaussian_entropy_without_e},
+    "gaussian_entropy_scalar": {"gaussian_entropy": gaussian_entropy_scalar},
+    "gaussian_entropy_of_variance": {"gaussian_entropy": gaussian_entropy_of_variance},
+    "gaussian_entropy_backward_ignores_upstream": {
+        "gaussian_entropy_backward": gaussian_entropy_backward_ignores_upstream
+    },
+    "gaussian_entropy_backward_mean_over_batch": {
+        "gaussian_entropy_backward": gaussian_entropy_backward_mean_over_batch
+    },
+}

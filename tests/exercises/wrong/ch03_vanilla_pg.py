@@ -1,0 +1,65 @@
+"""Plausible mistakes in chapter 3: L^PG's gradient and advantage normalisation."""
+
+import numpy as np
+
+
+def pg_objective_summed_gradient(logp, advantages):
+    """The mean as the value but the gradient of the sum (Â_t, not Â_t / n)."""
+    return float(np.mean(logp * advantages)), np.asarray(advantages, dtype=np.float64).copy()
+
+
+def pg_objective_as_a_loss(logp, advantages):
+    """−L^PG, the loss to minimise, where the contract asks for the objective."""
+    return -float(np.mean(logp * advantages)), -advantages / len(logp)
+
+
+def pg_objective_gradient_times_logp(logp, advantages):
+    """log π_t Â_t / n as the gradient, as if differentiating twice."""
+    return float(np.mean(logp * advantages)), logp * advantages / len(logp)
+
+
+def normalize_without_epsilon(advantages):
+    """No 1e-8: equal advantages give 0/0 = NaN."""
+    if len(advantages) < 2:
+        return advantages.copy()
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return (advantages - advantages.mean()) / advantages.std()
+
+
+def normalize_in_place(advantages):
+    """Right numbers, written over the caller's array."""
+    if len(advantages) > 1:
+        advantages -= advantages.mean()
+        advantages /= advantages.std() + 1e-8
+    return advantages
+
+
+def normalize_scale_only(advantages):
+    """Divides by the standard deviation but keeps the mean: no baseline."""
+    if len(advantages) < 2:
+        return advantages.copy()
+    return advantages / (advantages.std() + 1e-8)
+
+
+def normalize_single_sample_to_zero(advantages):
+    """Normalises a batch of one too, turning its advantage into 0."""
+    return (advantages - advantages.mean()) / (advantages.std() + 1e-8)
+
+
+def normalize_by_variance(advantages):
+    """Divides by the variance instead of the standard deviation."""
+    if len(advantages) < 2:
+        return advantages.copy()
+    return (advantages - advantages.mean()) / (advantages.var() + 1e-8)
+
+
+VARIANTS = {
+    "pg_objective_summed_gradient": {"pg_objective": pg_objective_summed_gradient},
+    "pg_objective_as_a_loss": {"pg_objective": pg_objective_as_a_loss},
+    "pg_objective_gradient_times_logp": {"pg_objective": pg_objective_gradient_times_logp},
+    "normalize_without_epsilon": {"normalize_advantages": normalize_without_epsilon},
+    "normalize_in_place": {"normalize_advantages": normalize_in_place},
+    "normalize_scale_only": {"normalize_advantages": normalize_scale_only},
+    "normalize_single_sample_to_zero": {"normalize_advantages": normalize_single_sample_to_zero},
+    "normalize_by_variance": {"normalize_advantages": normalize_by_variance},
+}

@@ -1,0 +1,102 @@
+"""Plausible mistakes in chapter 8: the value loss, its clipped form, and the signs in L^{CLIP+VF+S}."""
+
+import numpy as np
+
+from minippo.losses import clip_objective
+
+
+def value_loss_without_half(values, value_targets):
+    """Ê[(V − V^targ)²] with the gradient of the ½ version."""
+    error = values - value_targets
+    return float(np.mean(error**2)), error / len(values)
+
+
+def value_loss_gradient_sign(values, value_targets):
+    """∂L/∂V = (V^targ − V)/n: the sign flipped."""
+    error = values - value_targets
+    return 0.5 * float(np.mean(error**2)), -error / len(values)
+
+
+def value_loss_summed(values, value_targets):
+    """Summed over the batch instead of averaged."""
+    error = values - value_targets
+    return 0.5 * float(np.sum(error**2)), error
+
+
+def clipped_value_loss_min(values, value_targets, values_old, epsilon):
+    """The smaller of the two errors: optimistic, the opposite of the pessimistic max."""
+    error = values - value_targets
+    clipped_error = values_old + np.clip(values - values_old, -epsilon, epsilon) - value_targets
+    use_clipped = clipped_error**2 < error**2
+    inside = np.abs(values - values_old) <= epsilon
+    grad = np.where(use_clipped, np.where(inside, clipped_error, 0.0), error) / len(values)
+    return 0.5 * float(np.mean(np.minimum(error**2, clipped_error**2))), grad
+
+
+def clipped_value_loss_gradient_through_clip(values, value_targets, values_old, epsilon):
+    """The right loss, but the clipped branch passes a gradient even outside the band, where it is flat."""
+    error = values - value_targets
+    clipped_error = values_old + np.clip(values - values_old, -epsilon, epsilon) - value_targets
+    use_clipped = clipped_error**2 > error**2
+    grad = np.where(use_clipped, clipped_error, error) / len(values)
+    return 0.5 * float(np.mean(np.maximum(error**2, clipped_error**2))), grad
+
+
+def clipped_value_loss_clips_the_value(values, value_targets, values_old, epsilon):
+    """Clips V itself to [−ε, ε] instead of its change from V_old."""
+    error = values - value_targets
+    clipped_error = np.clip(values, -epsilon, epsilon) - value_targets
+    use_clipped = clipped_error**2 > error**2
+    inside = np.abs(values) <= epsilon
+    grad = np.where(use_clipped, np.where(inside, clipped_error, 0.0), error) / len(values)
+    return 0.5 * float(np.mean(np.maximum(error**2, clipped_error**2))), grad
+
+
+def _parts(logp, logp_old, advantages, values, value_targets, epsilon):
+    clip_value, grad_logp = clip_objective(logp, logp_old, advantages, epsilon)
+    error = values - value_targets
+    return clip_value, grad_logp, 0.5 * float(np.mean(error**2)), error / len(values)
+
+
+def objective_adds_the_value_loss(logp, logp_old, advantages, values, value_targets, entropy, epsilon, c1, c2):
+    """L^CLIP + c1 L^VF + c2 S: rewards a worse value fit."""
+    clip_value, grad_logp, vf, vf_grad = _parts(logp, logp_old, advantages, values, value_targets, epsilon)
+    n = len(logp)
+    return clip_value + c1 * vf + c2 * float(np.mean(entropy)), grad_logp, c1 * vf_grad, np.full(n, c2 / n)
+
+
+def objective_subtracts_the_entropy(logp, logp_old, advantages, values, value_targets, entropy, epsilon, c1, c2):
+    """L^CLIP − c1 L^VF − c2 S: punishes exploration."""
+    clip_value, grad_logp, vf, vf_grad = _parts(logp, logp_old, advantages, values, value_targets, epsilon)
+    n = len(logp)
+    return clip_value - c1 * vf - c2 * float(np.mean(entropy)), grad_logp, -c1 * vf_grad, np.full(n, -c2 / n)
+
+
+def objective_value_gradient_without_c1(logp, logp_old, advantages, values, value_targets, entropy, epsilon, c1, c2):
+    """The right value, but ∂L/∂V = −(V − V^targ)/n without its c1."""
+    clip_value, grad_logp, vf, vf_grad = _parts(logp, logp_old, advantages, values, value_targets, epsilon)
+    n = len(logp)
+    return clip_value - c1 * vf + c2 * float(np.mean(entropy)), grad_logp, -vf_grad, np.full(n, c2 / n)
+
+
+def objective_entropy_gradient_not_averaged(
+    logp, logp_old, advantages, values, value_targets, entropy, epsilon, c1, c2
+):
+    """∂L/∂S_t = c2 instead of c2 / n."""
+    clip_value, grad_logp, vf, vf_grad = _parts(logp, logp_old, advantages, values, value_targets, epsilon)
+    n = len(logp)
+    return clip_value - c1 * vf + c2 * float(np.mean(entropy)), grad_logp, -c1 * vf_grad, np.full(n, c2)
+
+
+VARIANTS = {
+    "value_loss_without_half": {"value_loss": value_loss_without_half},
+    "value_loss_gradient_sign": {"value_loss": value_loss_gradient_sign},
+    "value_loss_summed": {"value_loss": value_loss_summed},
+    "clipped_value_loss_min": {"clipped_value_loss": clipped_value_loss_min},
+    "clipped_value_loss_gradient_through_clip": {"clipped_value_loss": clipped_value_loss_gradient_through_clip},
+    "clipped_value_loss_clips_the_value": {"clipped_value_loss": clipped_value_loss_clips_the_value},
+    "objective_adds_the_value_loss": {"clip_vf_s_objective": objective_adds_the_value_loss},
+    "objective_subtracts_the_entropy": {"clip_vf_s_objective": objective_subtracts_the_entropy},
+    "objective_value_gradient_without_c1": {"clip_vf_s_objective": objective_value_gradient_without_c1},
+    "objective_entropy_gradient_not_averaged": {"clip_vf_s_objective": objective_entropy_gradient_not_averaged},
+}

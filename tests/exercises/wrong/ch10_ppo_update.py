@@ -1,0 +1,142 @@
+"""Plausible mistakes in chapter 10: the assembled loss and the epoch and minibatch loop."""
+
+import numpy as np
+
+from minippo import losses
+from minippo.optimizer import clip_grad_norm
+from solutions.ch10_ppo_update import loss_and_grad
+
+
+def _assemble(agent, minibatch, config, normalize=True, normalize_one=False, value_sign=1.0, grad_sign=1.0,
+              entropy=True, c1_in_gradient=True):  # fmt: skip
+    """loss_and_grad with switches for its usual mistakes."""
+    out, values, cache = agent.forward(minibatch["obs"])
+    dist = agent.distribution(out)
+    logp = dist.log_prob(minibatch["actions"])
+    n = len(logp)
+    advantages = minibatch["advantages"]
+    if normalize and config.normalize_advantages and (n > 1 or normalize_one):
+        advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
+    clip_value, grad_logp = losses.clip_objective(logp, minibatch["logp"], advantages, config.clip_epsilon)
+    value_loss, grad_values = losses.value_loss(values, minibatch["returns"])
+    loss = -clip_value + value_sign * config.value_coef * value_loss
+    grads = list(dist.log_prob_backward(minibatch["actions"], -grad_sign * grad_logp))
+    if entropy and config.entropy_coef:
+        loss -= config.entropy_coef * float(np.mean(dist.entropy()))
+        extra = dist.entropy_backward(np.full(n, -grad_sign * config.entropy_coef / n))
+        grads = [g + e for g, e in zip(grads, extra)]
+    value_scale = config.value_coef if c1_in_gradient else 1.0
+    agent.backward(cache, grads[0], grad_sign * value_sign * value_scale * grad_values, grads[1] if len(grads) > 1
+                   else None)  # fmt: skip
+    return float(loss)
+
+
+def loss_is_the_objective(agent, minibatch, config):
+    """Returns L^{CLIP+VF+S} and its gradient, where the contract asks for the loss to minimise (its negative)."""
+    loss = _assemble(agent, minibatch, config)
+    agent.grads *= -1.0
+    return -loss
+
+
+def loss_ignores_normalize_advantages(agent, minibatch, config):
+    """Never normalises the advantages."""
+    return _assemble(agent, minibatch, config, normalize=False)
+
+
+def loss_normalises_a_single_sample(agent, minibatch, config):
+    """Normalises a minibatch of one too, which turns its advantage into 0."""
+    return _assemble(agent, minibatch, config, normalize_one=True)
+
+
+def loss_adds_the_value_term_with_a_minus(agent, minibatch, config):
+    """−L^CLIP − c1 L^VF: the value loss rewarded instead of minimised."""
+    return _assemble(agent, minibatch, config, value_sign=-1.0)
+
+
+def loss_forgets_the_entropy(agent, minibatch, config):
+    """Leaves out the entropy bonus even when entropy_coef is not 0."""
+    return _assemble(agent, minibatch, config, entropy=False)
+
+
+def gradient_of_the_objective(agent, minibatch, config):
+    """The right loss, but the gradient written into agent.grads is that of the objective (the sign flipped)."""
+    loss = _assemble(agent, minibatch, config)
+    agent.grads *= -1.0
+    return loss
+
+
+def value_gradient_without_c1(agent, minibatch, config):
+    """The value head's gradient is not scaled by value_coef."""
+    return _assemble(agent, minibatch, config, c1_in_gradient=False)
+
+
+def _loop(agent, optimizer, data, config, rng, epochs=None, drop_last=False, shuffle=True, clip="norm",
+          same_minibatch=False, sign=1.0):  # fmt: skip
+    n, steps = len(data["logp"]), 0
+    for _ in range(config.epochs if epochs is None else epochs):
+        order = rng.permutation(n) if shuffle and config.shuffle_minibatches else np.arange(n)
+        starts = range(0, n - config.minibatch_size + 1 if drop_last else n, config.minibatch_size)
+        for start in starts:
+            begin = 0 if same_minibatch else start
+            index = order[begin : begin + config.minibatch_size]
+            loss_and_grad(agent, {key: value[index] for key, value in data.items()}, config)
+            if config.grad_norm_clipping and clip == "norm":
+                clip_grad_norm(agent.grads, config.max_grad_norm)
+            elif config.grad_norm_clipping and clip == "each":
+                np.clip(agent.grads, -config.max_grad_norm, config.max_grad_norm, out=agent.grads)
+            optimizer.step(sign * agent.grads)
+            steps += 1
+    return steps
+
+
+def update_one_epoch_only(agent, optimizer, data, config, rng):
+    """Goes over the batch once, whatever config.epochs says."""
+    return _loop(agent, optimizer, data, config, rng, epochs=1)
+
+
+def update_drops_the_last_minibatch(agent, optimizer, data, config, rng):
+    """Skips the last, smaller minibatch of each epoch."""
+    return _loop(agent, optimizer, data, config, rng, drop_last=True)
+
+
+def update_never_shuffles(agent, optimizer, data, config, rng):
+    """Always takes the rows in order, so every epoch sees the same minibatches."""
+    return _loop(agent, optimizer, data, config, rng, shuffle=False)
+
+
+def update_without_gradient_clipping(agent, optimizer, data, config, rng):
+    """Ignores grad_norm_clipping."""
+    return _loop(agent, optimizer, data, config, rng, clip=None)
+
+
+def update_clips_each_entry(agent, optimizer, data, config, rng):
+    """Clips every entry of the gradient to ±max_grad_norm instead of scaling its global norm."""
+    return _loop(agent, optimizer, data, config, rng, clip="each")
+
+
+def update_same_minibatch_every_step(agent, optimizer, data, config, rng):
+    """Slices the first minibatch of the order at every step."""
+    return _loop(agent, optimizer, data, config, rng, same_minibatch=True)
+
+
+def update_ascends_the_loss(agent, optimizer, data, config, rng):
+    """Hands the optimizer −∂loss/∂θ, so it climbs the loss."""
+    return _loop(agent, optimizer, data, config, rng, sign=-1.0)
+
+
+VARIANTS = {
+    "loss_is_the_objective": {"loss_and_grad": loss_is_the_objective},
+    "loss_ignores_normalize_advantages": {"loss_and_grad": loss_ignores_normalize_advantages},
+    "loss_normalises_a_single_sample": {"loss_and_grad": loss_normalises_a_single_sample},
+    "loss_adds_the_value_term_with_a_minus": {"loss_and_grad": loss_adds_the_value_term_with_a_minus},
+    "loss_forgets_the_entropy": {"loss_and_grad": loss_forgets_the_entropy},
+    "gradient_of_the_objective": {"loss_and_grad": gradient_of_the_objective},
+    "value_gradient_without_c1": {"loss_and_grad": value_gradient_without_c1},
+    "update_one_epoch_only": {"ppo_update": update_one_epoch_only},
+    "update_drops_the_last_minibatch": {"ppo_update": update_drops_the_last_minibatch},
+    "update_never_shuffles": {"ppo_update": update_never_shuffles},
+    "update_without_gradient_clipping": {"ppo_update": update_without_gradient_clipping},
+    "update_clips_each_entry": {"ppo_update": update_clips_each_entry},
+    "update_same_minibatch_every_step": {"ppo_update": update_same_minibatch_every_step},
+    "update_ascends_the_loss": {"ppo_update": update_ascends_the_loss},
+}
