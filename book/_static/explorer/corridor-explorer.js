@@ -234,13 +234,6 @@
       })
     );
 
-    root.addEventListener("keydown", (event) => {
-      if (event.target && event.target.tagName === "INPUT" && event.target.type !== "radio") return;
-      if (event.key === " " && event.target === root) {
-        event.preventDefault();
-        this.playing ? this.pause() : this.play();
-      }
-    });
   };
 
   CorridorExplorer.prototype.addSlider = function (parent, key, label, min, max, step, fromSlider, show, toSlider) {
@@ -271,9 +264,9 @@
   CorridorExplorer.prototype.buildTrack = function () {
     // a label column on the left, then the ratio axis from 0 to 2 with the band [1 - eps, 1 + eps] on it
     const width = 340;
-    this.track = { width: width, x0: 118, x1: width - 10, rMax: 2.0 };
+    this.track = { width: width, x0: 126, x1: width - 10, rMax: 2.0 };
     const t = this.track;
-    const node = svg("svg", { class: "ce-track", viewBox: "0 0 " + width + " 100", role: "img" });
+    const node = svg("svg", { class: "ce-track", viewBox: "0 0 " + width + " 104", role: "img" });
     this.trackSvg = node;
     const rows = [40, 70];
     for (const y of rows) node.appendChild(svg("line", { x1: t.x0, x2: t.x1, y1: y, y2: y, class: "ce-track-axis" }));
@@ -284,11 +277,14 @@
     node.append(this.bandLow, this.bandHigh);
     const oneX = this.ratioX(1.0);
     node.appendChild(svg("line", { class: "ce-one", x1: oneX, x2: oneX, y1: 24, y2: 86 }));
-    const oneLabel = svg("text", { class: "ce-one-label", x: oneX, y: 98, "text-anchor": "middle" });
+    const oneLabel = svg("text", { class: "ce-one-label", x: oneX, y: 101, "text-anchor": "middle" });
     oneLabel.textContent = "r = 1 (snapshot)";
     node.appendChild(oneLabel);
+    const hollow = svg("text", { class: "ce-axis-label", x: 0, y: 101 });
+    hollow.textContent = "\u25cb = clipped";
+    node.appendChild(hollow);
     for (const r of [0, 2]) {
-      const tick = svg("text", { class: "ce-axis-label", x: this.ratioX(r), y: 98, "text-anchor": "middle" });
+      const tick = svg("text", { class: "ce-axis-label", x: this.ratioX(r), y: 101, "text-anchor": "middle" });
       tick.textContent = String(r);
       node.appendChild(tick);
     }
@@ -297,7 +293,7 @@
       const y = rows[a];
       const name = svg("text", { class: "ce-dot-name", x: 0, y: y - 3 });
       name.textContent = ACTION_NAMES[a];
-      const label = svg("text", { class: "ce-dot-label", x: 0, y: y + 10 });
+      const label = svg("text", { class: "ce-dot-label", x: 0, y: y + 11 });
       const dot = svg("circle", { class: "ce-dot ce-dot-" + ACTION_NAMES[a], cy: y, r: 6.5 });
       node.append(name, label, dot);
       this.dots.push({ dot: dot, label: label, y: y });
@@ -328,7 +324,7 @@
   };
 
   CorridorExplorer.prototype.buildChart = function () {
-    const c = { w: 400, h: 200, left: 34, right: 366, top: 14, bottom: 172 };
+    const c = { w: 320, h: 196, left: 28, right: 290, top: 12, bottom: 164 };
     this.chart = c;
     const node = svg("svg", { class: "ce-chart", viewBox: "0 0 " + c.w + " " + c.h, role: "img" });
     node.appendChild(svg("rect", { class: "ce-chart-bg", x: c.left, y: c.top, width: c.right - c.left, height: c.bottom - c.top }));
@@ -348,15 +344,15 @@
       klTop: { x: c.right + 4, "text-anchor": "start", class: "ce-axis-label ce-axis-kl" },
       klZero: { x: c.right + 4, "text-anchor": "start", class: "ce-axis-label ce-axis-kl" },
       limit: { x: c.right - 4, "text-anchor": "end", class: "ce-axis-label ce-limit-label" },
-      xLabel: { x: (c.left + c.right) / 2, y: c.h - 10, "text-anchor": "middle", class: "ce-axis-label" },
-      xEnd: { x: c.right, y: c.h - 10, "text-anchor": "end", class: "ce-axis-label" },
+      xLabel: { x: c.left, y: c.h - 14, "text-anchor": "start", class: "ce-axis-label" },
+      xEnd: { x: c.right, y: c.h - 14, "text-anchor": "end", class: "ce-axis-label" },
     };
     for (const key in labels) {
       const text = svg("text", labels[key]);
       this.chartText[key] = text;
       node.appendChild(text);
     }
-    this.chartText.xLabel.textContent = "ticks (one tick = one epoch)";
+    this.chartText.xLabel.textContent = "ticks (1 tick = 1 epoch)";
     return node;
   };
 
@@ -564,7 +560,7 @@
       d.dot.setAttribute("cx", x.toFixed(2));
       d.dot.classList.toggle("ce-clipped", clipped);
       d.dot.classList.toggle("ce-off-scale", r > this.track.rMax);
-      d.label.textContent = minus("r " + fmt(r, 2) + ", \u00c2 " + signed(adv, 2) + (clipped ? ", clipped" : ""));
+      d.label.textContent = minus("r " + fmt(r, 2) + "  \u00c2 " + signed(adv, 2));
       trackWords.push(ACTION_NAMES[a] + " ratio " + fmt(r, 2) + (clipped ? ", clipped" : ""));
     }
     this.trackSvg.setAttribute(
@@ -634,10 +630,10 @@
     place("retTop", yRet(1), "1");
     place("retZero", yRet(0), "0");
     place("retBottom", yRet(-1), "-1");
-    place("optimal", yRet(ex.optimal) - 6, "optimal " + fmt(ex.optimal, 3));
+    place("optimal", yRet(ex.optimal) + 11, "optimal " + fmt(ex.optimal, 3));
     place("klTop", c.top, fmt(klMax, 2));
     place("klZero", c.bottom, "0");
-    place("limit", yKl(limit) - 6, "KL limit \u03b5\u00b2 = " + fmt(limit, 3));
+    place("limit", yKl(limit) - 5, "KL limit \u03b5\u00b2 = " + fmt(limit, 3));
     T.xEnd.textContent = "round " + ex.round;
   };
 
