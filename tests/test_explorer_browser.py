@@ -339,3 +339,24 @@ def test_moving_epsilon_changes_the_band(reader):
     assert width_at[0.05] < width_at[0.2] < width_at[0.5]
     assert width_at[0.5] == pytest.approx(10 * width_at[0.05], rel=0.05)  # the band is drawn to scale
     assert any("ε → 0.50" in line for line in reader.log())
+
+
+def test_huge_step_preset_stays_bounded(reader):
+    """Clip with a ten times larger step and 40 epochs: the KL peaks higher than under the clip preset, but far
+    below the unclipped objective with the same step. The chart's KL axis, scaled to the largest KL seen, is read
+    off the screen and checked against minippo's own trajectory up to the same tick."""
+    reader.preset("hugestep")
+    reader.fastest()
+    reader.play()
+    reader.watch(lambda s: s[-1]["round"] >= 10, timeout=60)
+    reader.pause()
+    screen = reader.screen()
+    epoch, epochs = (int(x) for x in screen["epoch"].split("/"))
+    ticks = (screen["round"] - 1) * epochs + epoch
+    axis_top = float(reader.find("svg.ce-chart text.ce-axis-kl").text)  # the first KL label is the axis top
+    trace = cd.run({"preset": "hugestep"}, ticks=ticks)
+    peak = max(r["kl"] for r in trace)
+    assert axis_top == pytest.approx(max(2.5 * cd.kl_limit(0.2), 1.08 * peak), abs=0.006)
+    unclipped = cd.run({"preset": "hugestep", "objective": "cpi"}, ticks=ticks)
+    assert peak < 0.25 * max(r["kl"] for r in unclipped)
+    assert screen["return"] > 0.8 * screen["optimal"]
