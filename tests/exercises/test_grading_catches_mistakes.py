@@ -1,0 +1,124 @@
+"""The grading tests themselves, checked: no test passes against the untouched stubs, every deliberately wrong variant
+fails at least one test, every exercise function is graded, and exercises/ is what solutions/ generates.
+
+Each check runs the grading tests in a child pytest process, the way ``minippo grade`` does.
+"""
+
+from __future__ import annotations
+
+import ast
+import importlib.util
+import os
+import re
+from collections import defaultdict
+
+import _harness
+import pytest
+from make_exercises import SOLUTIONS, exercise_names, expected_exercises
+
+from minippo.grade import chapter_files, run_tests
+
+pytestmark = pytest.mark.skipif(
+    _harness.implementation() != "solutions", reason="checks the grading tests themselves, not an implementation"
+)
+WRONG = _harness.ROOT / "tests" / "exercises" / "wrong"
+
+
+def variants_of(chapter: str) -> dict:
+    spec = importlib.util.spec_from_file_location(f"_variants_{chapter}", WRONG / f"{chapter}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.VARIANTS
+
+
+def exercises_by_chapter() -> dict[str, list[str]]:
+    return {
+        path.stem: exercise_names(ast.parse(path.read_text(encoding="utf-8")))
+        for path in sorted(SOLUTIONS.glob("ch*.py"))
+    }
+
+
+def test_there_are_at_least_twelve_graded_exercises_in_ten_chapters():
+    chapters = exercises_by_chapter()
+    functions = [name for names in chapters.values() for name in names]
+    assert len(chapters) >= 10 and len(functions) >= 12, (len(chapters), functions)
+    assert sorted(chapters) == sorted(path.stem[5:] for path in chapter_files().values())
+
+
+def test_every_exercise_function_is_called_by_its_grading_tests():
+    files = {path.stem[5:]: path.read_text(encoding="utf-8") for path in chapter_files().values()}
+    for chapter, names in exercises_by_chapter().items():
+        for name in names:
+            assert f"student.{name}(" in files[chapter] or f"student.{name}," in files[chapter], (
+                f"{chapter}.{name} is never called by test_{chapter}.py"
+            )
+
+
+def test_exercises_are_generated_from_the_solutions():
+    """exercises/ is what solutions/ generates, byte for byte. On a student's machine (not in CI), where exercises/
+    holds their work, the exercise functions must still have the solutions' signatures and contracts."""
+    for name, expected in expected_exercises().items():
+        text = (_harness.ROOT / "exercises" / name).read_text(encoding="utf-8")
+        if os.environ.get("CI") or text == expected:
+            assert text == expected, (
+                f"exercises/{name} is not what solutions/{name} generates: run python tests/exercises/make_exercises.py"
+            )
+        else:
+            assert _contracts(text) == _contracts(expected), (
+                f"exercises/{name}: the exercise functions' signatures or docstrings differ from solutions/{name}"
+            )
+
+
+def _contracts(text: str) -> dict:
+    tree = ast.parse(text)
+    names = set(exercise_names(tree))
+    return {
+        node.name: (ast.unparse(node.args), ast.get_docstring(node))
+        for node in tree.body
+        if isinstance(node, ast.FunctionDef) and node.name in names
+    }
+
+
+@pytest.mark.timeout(600)
+def test_every_grading_test_fails_against_the_untouched_stubs(tmp_path):
+    # the stubs exactly as exercises/ ships them, written afresh (a student's exercises/ may hold real work by now)
+    for name, text in expected_exercises().items():
+        (tmp_path / name).write_text(text, encoding="utf-8")
+    files = [chapter_files()[n] for n in sorted(chapter_files())]
+    collected, results, note = run_tests(str(tmp_path), files, limit_s=500)
+    assert not note, note
+    assert len(collected) >= 100 and len(results) == len(collected), (len(collected), len(results))
+    passed = [r.nodeid for r in results if r.outcome == "passed"]
+    assert not passed, f"{len(passed)} grading test(s) pass without any code written: {passed[:5]}"
+    skipped = [r.nodeid for r in results if r.outcome == "skipped"]
+    assert not skipped, f"grading tests skipped against the stubs: {skipped[:5]}"
+    unclear = [r for r in results if "is not written yet" not in r.message]
+    assert not unclear, (
+        f"these failures do not say that the exercise is unwritten: {[(r.nodeid, r.message) for r in unclear[:3]]}"
+    )
+
+
+@pytest.mark.timeout(900)
+def test_every_wrong_variant_fails_at_least_one_grading_test():
+    expected = {(chapter, name) for chapter in exercises_by_chapter() for name in variants_of(chapter)}
+    for chapter in exercises_by_chapter():
+        # two or more plausible mistakes per exercise function, where the function has room for them
+        touched = defaultdict(int)
+        for replaced in variants_of(chapter).values():
+            for function in replaced:
+                touched[function] += 1
+        for function in exercise_names(ast.parse((SOLUTIONS / f"{chapter}.py").read_text(encoding="utf-8"))):
+            assert touched[function] >= 2, f"{chapter}.{function} has {touched[function]} wrong variant(s)"
+
+    files = [chapter_files()[n] for n in sorted(chapter_files())]
+    # a variant skips the rest of its tests once one has failed, so each costs little beyond its first failure
+    collected, results, note = run_tests("wrong", files, stop_at_first_failure=True, limit_s=800)
+    assert not note, note
+    outcomes = defaultdict(list)
+    for result in results:
+        match = re.search(r"test_(ch\d\d_\w+?)\.py::.*\[.*wrong=([A-Za-z0-9_]+)", result.nodeid)
+        assert match, f"a grading test ran without a variant: {result.nodeid}"
+        outcomes[(match.group(1), match.group(2))].append(result)
+    assert set(outcomes) == expected, f"variants that did not run: {sorted(expected - set(outcomes))}"
+    accepted = [variant for variant, rs in outcomes.items() if not any(r.outcome == "failed" for r in rs)]
+    assert not accepted, f"wrong variants that pass every grading test: {accepted}"
