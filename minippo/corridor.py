@@ -385,6 +385,12 @@ def check_settings(settings):
     if merged["epochs"] != int(merged["epochs"]):
         raise MinippoError(f"epochs must be a whole number, not {merged['epochs']!r}")
     merged["epochs"] = int(merged["epochs"])
+    seed = merged["seed"]
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**32:
+        raise MinippoError(f"seed must be a whole number in [0, 2**32), not {seed!r}")
+    for key in ("gamma", "kl_beta", "kl_target"):
+        if isinstance(merged[key], bool) or not isinstance(merged[key], (int, float)):
+            raise MinippoError(f"{key} must be a number, not {merged[key]!r}")
     if not 0.0 < merged["gamma"] < 1.0:
         raise MinippoError(f"gamma must be in (0, 1), not {merged['gamma']!r}")
     if not merged["kl_beta"] > 0.0 or not merged["kl_target"] > 0.0:

@@ -281,6 +281,8 @@ def test_epsilon_moves_the_band_and_the_limit():
         ({"clip": 0.2}, "unknown corridor setting"),
         ({"preset": "fast"}, "preset must be one of"),
         ({"gamma": 1.0}, "gamma must be in"),
+        ({"seed": "one"}, "seed must be a whole number"),
+        ({"kl_beta": None}, "kl_beta must be a number"),
     ],
 )
 def test_bad_settings_get_a_clear_error(settings, message):
