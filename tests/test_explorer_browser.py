@@ -25,6 +25,9 @@ import pytest
 
 from minippo import corridor as cd
 
+# the first test may build the whole book (the built_book fixture); every wait below has its own, shorter limit
+pytestmark = pytest.mark.timeout(1500)
+
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMEDRIVER = Path("/usr/bin/chromedriver")
 PAGE = "05-clipping.html"
