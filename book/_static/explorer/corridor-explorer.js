@@ -455,6 +455,7 @@
   // plays n ticks of the math, noting what the event log should say
   CorridorExplorer.prototype.advance = function (n) {
     const ex = this.explorer;
+    if (this.finished) return;
     for (let i = 0; i < n; i++) {
       if (ex.epoch >= ex.settings.epochs) {
         this.endOfRound();
