@@ -522,7 +522,7 @@
     p.clipped.value.textContent = percent(rec.clip_fraction);
     const clipLabel = ex.settings.objective === "clip" ? "clipped " : "outside band ";
     if (p.clipped.label.textContent !== clipLabel) p.clipped.label.textContent = clipLabel;
-    p.beta.value.textContent = fmt(rec.beta, 3);
+    p.beta.value.textContent = rec.beta >= 0.01 ? fmt(rec.beta, 3) : minus(rec.beta.toExponential(1));
     p.beta.part.hidden = ex.settings.objective !== "klpen";
     this.root.setAttribute("data-round", String(ex.round));
     this.root.setAttribute("data-epoch", String(ex.epoch));
