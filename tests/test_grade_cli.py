@@ -1,0 +1,154 @@
+"""``minippo grade``: chapter names, the scoreboard, exit codes, and student code that raises, returns NaN or the wrong
+shape, has a syntax error or never finishes importing, each of which must become a failing line, never a crash."""
+
+import importlib.util
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from minippo import grade
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run_grade(*args, impl=None, timeout=300):
+    env = dict(os.environ)
+    env.pop("MINIPPO_IMPL", None)
+    if impl is not None:
+        env["MINIPPO_IMPL"] = str(impl)
+    return subprocess.run(
+        [sys.executable, "-m", "minippo", "grade", *args],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+
+
+@pytest.mark.parametrize(
+    "text, number",
+    [
+        ("5", 5),
+        ("05", 5),
+        ("ch05", 5),
+        ("clipping", 5),
+        ("ch05_clipping", 5),
+        ("the-min", 6),
+        ("the_min", 6),
+        ("vanilla-pg", 3),
+        ("ppo_update", 10),
+        ("everything-together", 10),
+        ("CH07", 7),
+        ("11", 11),
+    ],
+)
+def test_chapter_names(text, number):
+    assert grade.resolve_chapter(text) == number
+
+
+@pytest.mark.parametrize("text", ["foo", "", "ch", "network-x"])
+def test_unknown_chapter_names(text):
+    assert grade.resolve_chapter(text) is None
+
+
+@pytest.mark.timeout(120)
+def test_solutions_get_a_full_score():
+    result = run_grade("5", "--solutions")
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "ch05 clipping" in result.stdout and "7/7" in result.stdout and "all passed" in result.stdout
+
+
+@pytest.mark.timeout(120)
+def test_the_stubs_score_zero_and_say_why(tmp_path):
+    spec = importlib.util.spec_from_file_location("make_exercises", ROOT / "tests" / "exercises" / "make_exercises.py")
+    make_exercises = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(make_exercises)
+    (tmp_path / "ch06_the_min.py").write_text(make_exercises.expected_exercises()["ch06_the_min.py"])
+    result = run_grade("ch06", impl=tmp_path)
+    assert result.returncode == 1, result.stdout + result.stderr
+    line = next(line for line in result.stdout.splitlines() if line.startswith("ch06 the min"))
+    assert "0/12" in line and "clip_objective is not written yet" in line, result.stdout
+    assert "total" in result.stdout and result.stderr == ""
+
+
+@pytest.mark.parametrize("chapter", ["foo", "11", "42"])
+def test_bad_chapters_get_one_line_and_exit_code_2(chapter):
+    result = run_grade(chapter)
+    assert result.returncode == 2
+    assert result.stdout == ""
+    assert len(result.stderr.strip().splitlines()) == 1 and result.stderr.startswith("minippo: error: ")
+    assert "Traceback" not in result.stderr
+
+
+BROKEN = {
+    # clip_fraction returns an array, clipped_surrogate returns NaN where it should not
+    "ch05_clipping.py": """
+        import numpy as np
+
+        def clipped_surrogate(logp, logp_old, advantages, epsilon):
+            ratio = np.exp(logp - logp_old)
+            return float("nan"), ratio * np.nan
+
+        def clip_fraction(logp, logp_old, epsilon):
+            return np.abs(np.exp(logp - logp_old) - 1) > epsilon
+    """,
+    # a syntax error
+    "ch03_vanilla_pg.py": """
+        def pg_objective(logp, advantages)
+            return 0
+    """,
+    # stuck at import time
+    "ch04_cpi.py": """
+        while True:
+            pass
+    """,
+    # raises
+    "ch09_kl_penalty.py": """
+        def categorical_kl(logits_old, logits):
+            raise ValueError("shapes do not match")
+
+        def categorical_kl_backward(logits_old, logits, grad_kl):
+            return logits[0]
+
+        def kl_penalty_objective(logp, logp_old, advantages, kl, beta):
+            return 0.0
+
+        def adaptive_beta(beta, kl, kl_target):
+            return beta
+    """,
+}
+
+
+@pytest.mark.timeout(300)
+def test_broken_student_code_fails_its_tests_and_never_stops_the_grader(tmp_path):
+    for name, source in BROKEN.items():
+        (tmp_path / name).write_text(textwrap.dedent(source))
+    result = run_grade(impl=tmp_path, timeout=250)  # every chapter; the ones without a file fail at once
+    assert result.returncode == 1, result.stdout + result.stderr
+    assert "Traceback" not in result.stdout + result.stderr
+    scores = {c: next(line for line in result.stdout.splitlines() if line.startswith(f"ch0{c}")) for c in "3459"}
+    assert "no such file" in next(line for line in result.stdout.splitlines() if line.startswith("ch01"))
+    assert " 0/" in scores["3"] and "SyntaxError on line 2" in scores["3"], scores["3"]
+    assert " 0/" in scores["4"] and "took longer than the time limit" in scores["4"], scores["4"]
+    assert " 0/" in scores["5"] and "NaN" in scores["5"], scores["5"]
+    assert "categorical_kl raised ValueError: shapes do not match" in scores["9"], scores["9"]
+
+
+def test_grade_counts_every_test_and_reports_the_first_failure():
+    results = [
+        grade.Result("tests/exercises/test_ch05_clipping.py::test_a", "passed"),
+        grade.Result("tests/exercises/test_ch05_clipping.py::test_b", "failed", "clip_fraction: first"),
+        grade.Result("tests/exercises/test_ch05_clipping.py::test_c", "failed", "clip_fraction: second"),
+        grade.Result("tests/exercises/test_ch06_the_min.py::test_a", "passed"),
+    ]
+    lines, all_passed = grade.scoreboard(results, [5, 6])
+    assert not all_passed
+    assert lines[0].startswith("ch05 clipping") and "1/3" in lines[0] and lines[0].endswith("clip_fraction: first")
+    assert "1/1" in lines[1] and lines[1].endswith("all passed")
+    assert lines[2].startswith("total") and lines[2].endswith("2/4")
+    assert grade.scoreboard(results[3:], [6])[1]
