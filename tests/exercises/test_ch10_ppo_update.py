@@ -280,8 +280,9 @@ def test_ppo_update_learns_cartpole(student):
         for env in trainer.envs:
             env.close()
     reached = float(np.mean(recent))
+    start = float(np.mean(trainer.rollout.completed_returns[:20] or [np.nan]))
     assert reached >= LEARN_THRESHOLD, (
         f"ppo_update: PPO with your update did not learn CartPole-v1: the mean return of the last 20 episodes is "
         f"{reached:.0f} after {trainer.rollout.steps} steps ({time.perf_counter() - started:.0f} s); it should reach "
-        f"{LEARN_THRESHOLD:.0f} (a random policy scores about 22)"
+        f"{LEARN_THRESHOLD:.0f} (the run's first 20 episodes averaged {start:.0f})"
     )
