@@ -28,6 +28,7 @@ class ActorCritic:
         log_std_init: float = 0.0,
         orthogonal_init: bool = True,
         rng: np.random.Generator | None = None,
+        dtype="float64",
     ):
         if kind not in ("discrete", "continuous"):
             raise ValueError(f"kind must be 'discrete' or 'continuous', not {kind!r}")
@@ -44,7 +45,8 @@ class ActorCritic:
             specs = [("policy", (obs_dim, *hidden, act_dim), 0.01, False), ("value", (obs_dim, *hidden, 1), 1.0, False)]
         sizes = [MLP(s, activate_output=a).n_params for _, s, _, a in specs]
         n_log_std = act_dim if kind == "continuous" else 0
-        self.params = np.zeros(sum(sizes) + n_log_std)
+        self.dtype = np.dtype(dtype)  # float64 for gradient checks; training defaults to float32 (Config.dtype)
+        self.params = np.zeros(sum(sizes) + n_log_std, dtype=self.dtype)
         self.grads = np.zeros_like(self.params)
         offset, self.nets = 0, {}
         for (name, net_sizes, gain, activate), size in zip(specs, sizes):
@@ -62,6 +64,7 @@ class ActorCritic:
 
     def forward(self, obs: np.ndarray):
         """Return (distribution parameters (logits or mean), values V(s) of shape (n,), cache)."""
+        obs = obs.astype(self.dtype, copy=False)
         if self.shared:
             features, trunk_cache = self.nets["trunk"].forward(obs)
             out, policy_cache = self.nets["policy"].forward(features)
@@ -86,11 +89,13 @@ class ActorCritic:
 
     def policy_output(self, obs: np.ndarray) -> np.ndarray:
         """Logits or mean only, for acting (the rollout's hot path: no cache, no value)."""
+        obs = obs.astype(self.dtype, copy=False)
         if self.shared:
             return self.nets["policy"](self.nets["trunk"](obs))
         return self.nets["policy"](obs)
 
     def value(self, obs: np.ndarray) -> np.ndarray:
+        obs = obs.astype(self.dtype, copy=False)
         features = self.nets["trunk"](obs) if self.shared else obs
         return self.nets["value"](features)[:, 0]
 
@@ -99,7 +104,7 @@ class ActorCritic:
             "obs_dim": self.obs_dim,
             "kind": self.kind,
             "act_dim": self.act_dim,
-            "hidden_sizes": list(self.hidden_sizes),
+            "hidden_sizes": list(self.hidden_sizes), "dtype": self.dtype.name,
             "shared": self.shared,
         }
 
@@ -123,7 +128,8 @@ def load_policy(path):
         with np.load(path, allow_pickle=False) as data:
             stored = {key: data[key] for key in data.files}
         meta = json.loads(str(stored["meta"]))
-        agent = ActorCritic(meta["obs_dim"], meta["kind"], meta["act_dim"], meta["hidden_sizes"], meta["shared"])
+        agent = ActorCritic(meta["obs_dim"], meta["kind"], meta["act_dim"], meta["hidden_sizes"], meta["shared"],
+                            dtype=meta.get("dtype", "float64"))
         if stored["params"].shape != agent.params.shape:
             raise ValueError("weights of the wrong size")
         agent.params[...] = stored["params"]

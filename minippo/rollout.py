@@ -44,20 +44,20 @@ class Rollout:
         T, N, agent = self.horizon, len(self.envs), self.agent
         obs_dim = self.raw_obs.shape[1]
         raw_obs = np.empty((T, N, obs_dim))
-        obs = np.empty((T, N, obs_dim))
+        obs = np.empty((T, N, obs_dim), dtype=agent.dtype)
         rewards = np.empty((T, N))
         terminated = np.zeros((T, N), dtype=bool)
         truncated = np.zeros((T, N), dtype=bool)
         final_obs = {}  # (t, i) -> normalised last observation of an episode cut by a time limit
         continuous = agent.kind == "continuous"
         if continuous:
-            actions = np.empty((T, N, agent.act_dim))
-            policy_out = np.empty((T, N, agent.act_dim))
+            actions = np.empty((T, N, agent.act_dim), dtype=agent.dtype)
+            policy_out = np.empty((T, N, agent.act_dim), dtype=agent.dtype)
             noise = self.rng.standard_normal((T, N, agent.act_dim))  # drawn at once: same numbers, fewer calls
             std = np.exp(agent.log_std)
         else:
             actions = np.empty((T, N), dtype=np.int64)
-            policy_out = np.empty((T, N, agent.act_dim))
+            policy_out = np.empty((T, N, agent.act_dim), dtype=agent.dtype)
             uniforms = self.rng.random((T, N))
 
         for t in range(T):
