@@ -155,3 +155,37 @@ def test_nan_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path, capsys):
     with np.load(out / "checkpoint.npz") as data:
         assert int(data["update"]) == 2  # updates 1 and 2 finished before step 1301
     assert np.all(np.isfinite(np.load(out / "policy.npz")["params"]))
+
+
+def test_resume_continues_the_run(tmp_path):
+    out = tmp_path / "resumable"
+    common = ["--out", str(out), "--quiet", "--config", "horizon=256", "minibatch_size=64", "epochs=1"]
+    assert run("train", "CartPole-v1", "--steps", "512", *common).returncode == 0
+    result = run("train", "CartPole-v1", "--steps", "1024", "--resume", "--out", str(out), "--quiet")
+    assert result.returncode == 0, result.stderr
+    steps = [line.split(",")[1] for line in (out / "progress.csv").read_text().splitlines()[1:]]
+    assert steps == ["256", "512", "768", "1024"]
+
+
+@pytest.mark.timeout(600)
+def test_eval_renders_a_gif_offscreen(tmp_path):
+    out = tmp_path / "pendulum"
+    trained = run(
+        "train",
+        "InvertedPendulum-v5",
+        "--steps",
+        "256",
+        "--out",
+        str(out),
+        "--quiet",
+        "--config",
+        "horizon=256",
+        "epochs=1",
+    )
+    assert trained.returncode == 0, trained.stderr
+    result = run("eval", str(out), "--episodes", "1", "--gif", str(tmp_path / "agent.gif"))
+    assert result.returncode == 0, result.stderr
+    from PIL import Image
+
+    with Image.open(tmp_path / "agent.gif") as gif:
+        assert gif.n_frames >= 1 and gif.size == (320, 320)
