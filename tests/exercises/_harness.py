@@ -19,7 +19,6 @@ import importlib
 import importlib.util
 import os
 import sys
-import types
 from pathlib import Path
 
 import numpy as np
@@ -98,10 +97,13 @@ def _import_file(path: Path, name: str):
 
 
 def load_wrong_variant(chapter: str, variant: str):
-    """The reference solution of ``chapter`` with the functions of one wrong variant swapped in."""
-    solution = importlib.import_module(f"solutions.{chapter}")
+    """A fresh copy of the reference solution of ``chapter`` with the functions of one wrong variant swapped in.
+
+    The swap is made in the copy's globals, so the solution's other functions call the wrong one too (as a student's
+    ppo_update would call their own loss_and_grad).
+    """
+    module = _import_file(ROOT / "solutions" / f"{chapter}.py", f"_solution_{chapter}_{variant}")
     wrong = _import_file(ROOT / "tests" / "exercises" / "wrong" / f"{chapter}.py", f"_wrong_{chapter}")
-    module = types.SimpleNamespace(**vars(solution))
     for name, function in wrong.VARIANTS[variant].items():
         setattr(module, name, function)
     return module
