@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import argparse
 import csv
-import os
+import hashlib
 import shlex
 import subprocess
 import sys
@@ -80,6 +80,14 @@ def git_commit() -> str:
     return head.stdout.strip() + ("" if clean else "+local-changes")
 
 
+def source_digest() -> str:
+    """A digest of minippo's source, to notice a change of the code while a run is going on."""
+    digest = hashlib.sha256()
+    for path in sorted((ROOT / "minippo").glob("*.py")):
+        digest.update(path.name.encode() + path.read_bytes())
+    return digest.hexdigest()
+
+
 def read_rows(run_dir: Path) -> list[dict]:
     with open(run_dir / "progress.csv", newline="") as handle:
         return list(csv.DictReader(handle))
@@ -87,12 +95,13 @@ def read_rows(run_dir: Path) -> list[dict]:
 
 def run_one(ablation: str, env: str, steps: int, seed: int) -> dict:
     command = command_for(ablation, env, steps, seed)
-    # one BLAS thread: the matrices are small, and on two shared cores extra threads only spin
-    environment = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
-    result = subprocess.run(command, cwd=ROOT, env=environment, capture_output=True, text=True)
+    commit, digest = git_commit(), source_digest()
+    result = subprocess.run(command, cwd=ROOT, capture_output=True, text=True)
     if result.returncode != 0:
         message = (result.stderr.strip().splitlines() or ["no message"])[-1]
         raise RuntimeError(f"{ablation} seed {seed} failed: {message}")
+    if source_digest() != digest:
+        raise RuntimeError(f"minippo's source changed during {ablation} seed {seed}; run the script again")
     run_dir = ROOT / command[command.index("--out") + 1]
     rows = read_rows(run_dir)
     for name in ("checkpoint.npz", "policy.npz", "curve.png"):  # the record is config.json + progress.csv
@@ -109,8 +118,8 @@ def run_one(ablation: str, env: str, steps: int, seed: int) -> dict:
         "return_last10": round(sum(tail) / len(tail), 2),
         "wall_s": round(float(last["wall_s"]), 1),
         "steps_per_s": round(float(last["steps_per_s"]), 1),
-        "commit": git_commit(),
-        "command": "OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 " + shlex.join(command),
+        "commit": commit,
+        "command": shlex.join(command),
     }
 
 
