@@ -15,7 +15,8 @@ import numpy as np
 EXERCISES = ["categorical_kl", "categorical_kl_backward", "kl_penalty_objective", "adaptive_beta"]
 
 
-def _log_softmax(logits: np.ndarray) -> np.ndarray:
+def log_softmax(logits: np.ndarray) -> np.ndarray:
+    """Chapter 2's log-softmax, given: log π_j = z_j − log Σ_i exp z_i for every row, after subtracting the max."""
     shifted = logits - logits.max(axis=-1, keepdims=True)
     return shifted - np.log(np.exp(shifted).sum(axis=-1, keepdims=True))
 

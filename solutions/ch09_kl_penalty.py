@@ -14,7 +14,8 @@ import numpy as np
 EXERCISES = ["categorical_kl", "categorical_kl_backward", "kl_penalty_objective", "adaptive_beta"]
 
 
-def _log_softmax(logits: np.ndarray) -> np.ndarray:
+def log_softmax(logits: np.ndarray) -> np.ndarray:
+    """Chapter 2's log-softmax, given: log π_j = z_j − log Σ_i exp z_i for every row, after subtracting the max."""
     shifted = logits - logits.max(axis=-1, keepdims=True)
     return shifted - np.log(np.exp(shifted).sum(axis=-1, keepdims=True))
 
@@ -24,7 +25,7 @@ def categorical_kl(logits_old: np.ndarray, logits: np.ndarray) -> np.ndarray:
 
     logits_old, logits: (n, k).  Returns (n,), finite for logits of ±1000 (use log-softmax, not log of softmax).
     """
-    log_old, log_new = _log_softmax(logits_old), _log_softmax(logits)
+    log_old, log_new = log_softmax(logits_old), log_softmax(logits)
     return (np.exp(log_old) * (log_old - log_new)).sum(axis=-1)
 
 
@@ -33,7 +34,7 @@ def categorical_kl_backward(logits_old: np.ndarray, logits: np.ndarray, grad_kl:
 
     grad_kl: (n,).  Returns (n, k).
     """
-    probs_old, probs = np.exp(_log_softmax(logits_old)), np.exp(_log_softmax(logits))
+    probs_old, probs = np.exp(log_softmax(logits_old)), np.exp(log_softmax(logits))
     return (probs - probs_old) * grad_kl[:, None]
 
 

@@ -155,7 +155,7 @@ def pytest_generate_tests(metafunc):
     """Under MINIPPO_IMPL=wrong, run every test once per wrong variant of its chapter."""
     if "student" in metafunc.fixturenames and implementation() == "wrong":
         variants = wrong_variants(chapter_of(metafunc.module.__name__))
-        metafunc.parametrize("student", variants or [None], indirect=True, ids=lambda v: f"wrong={v}")
+        metafunc.parametrize("student", variants or [None], indirect=True, ids=lambda v: f"wrong_{v}")
 
 
 @pytest.fixture

@@ -38,6 +38,28 @@ def actions(rng):
 # categorical
 
 
+def test_log_softmax_matches_the_definition(student, logits):
+    result = call_checking_inputs(student.log_softmax, "log_softmax", logits)
+    check_array(result, "log_softmax", (6, 4))
+    expected = [[np.log(np.exp(z) / np.sum(np.exp(row))) for z in row] for row in logits]
+    check_close(result, expected, "log_softmax", "log π_j = z_j − log Σ exp z")
+    check_close(np.exp(result).sum(axis=1), np.ones(6), "log_softmax", "Σ_j exp(log π_j) (it should be 1 per row)")
+    check_close(
+        student.log_softmax(logits + 40.0),
+        result,
+        "log_softmax",
+        "the result for z + 40 (it should not change: adding a constant to every logit leaves the softmax as it is)",
+    )
+
+
+def test_log_softmax_survives_extreme_logits(student):
+    logits = np.array([[1000.0, 0.0, -1000.0], [-1000.0, -1000.0, -1000.0], [-1000.0, 1000.0, 0.0]])
+    result = student.log_softmax(logits)
+    check_array(result, "log_softmax", (3, 3), "the result for logits of ±1000 (subtract each row's max first)")
+    expected = [[0.0, -1000.0, -2000.0], [-np.log(3.0)] * 3, [-2000.0, 0.0, -1000.0]]
+    check_close(result, expected, "log_softmax", "log π for logits of ±1000")
+
+
 def test_categorical_log_prob_matches_the_softmax(student, logits, actions):
     logp = call_checking_inputs(student.categorical_log_prob, "categorical_log_prob", logits, actions)
     check_array(logp, "categorical_log_prob", (6,))

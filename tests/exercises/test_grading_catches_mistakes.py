@@ -116,7 +116,7 @@ def test_every_wrong_variant_fails_at_least_one_grading_test():
     assert not note, note
     outcomes = defaultdict(list)
     for result in results:
-        match = re.search(r"test_(ch\d\d_\w+?)\.py::.*\[.*wrong=([A-Za-z0-9_]+)", result.nodeid)
+        match = re.search(r"test_(ch\d\d_\w+?)\.py::.*\[.*?wrong_([A-Za-z0-9_]+)", result.nodeid)
         assert match, f"a grading test ran without a variant: {result.nodeid}"
         outcomes[(match.group(1), match.group(2))].append(result)
     assert set(outcomes) == expected, f"variants that did not run: {sorted(expected - set(outcomes))}"

@@ -15,6 +15,31 @@ def softmax(logits):
     return e / e.sum(axis=-1, keepdims=True)
 
 
+def log_softmax_unshifted(logits):
+    """z − log Σ exp z without subtracting the maximum: exp(1000) overflows."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return logits - np.log(np.exp(logits).sum(axis=-1, keepdims=True))
+
+
+def log_softmax_shift_by_mean(logits):
+    """Shifts by the row's mean instead of its maximum, which still overflows when the logits are far apart."""
+    shifted = logits - logits.mean(axis=-1, keepdims=True)
+    with np.errstate(over="ignore", invalid="ignore"):
+        return shifted - np.log(np.exp(shifted).sum(axis=-1, keepdims=True))
+
+
+def log_softmax_forgets_the_shift_in_the_result(logits):
+    """Computes log Σ exp of the shifted logits but subtracts it from the unshifted ones (off by max z)."""
+    shifted = logits - logits.max(axis=-1, keepdims=True)
+    return logits - np.log(np.exp(shifted).sum(axis=-1, keepdims=True))
+
+
+def log_softmax_log_of_softmax(logits):
+    """log of the (shifted) softmax: a probability that underflows to 0 gives −inf."""
+    with np.errstate(divide="ignore"):
+        return np.log(softmax(logits))
+
+
 def categorical_log_prob_naive(logits, actions):
     """log of softmax, without subtracting the maximum first: exp(1000) overflows."""
     with np.errstate(all="ignore"):
@@ -150,6 +175,10 @@ def gaussian_entropy_backward_mean_over_batch(mean, log_std, grad_entropy):
 
 
 VARIANTS = {
+    "log_softmax_unshifted": {"log_softmax": log_softmax_unshifted},
+    "log_softmax_shift_by_mean": {"log_softmax": log_softmax_shift_by_mean},
+    "log_softmax_forgets_the_shift_in_the_result": {"log_softmax": log_softmax_forgets_the_shift_in_the_result},
+    "log_softmax_log_of_softmax": {"log_softmax": log_softmax_log_of_softmax},
     "categorical_log_prob_naive": {"categorical_log_prob": categorical_log_prob_naive},
     "categorical_log_prob_log_of_softmax": {"categorical_log_prob": categorical_log_prob_log_of_softmax},
     "categorical_log_prob_returns_logit": {"categorical_log_prob": categorical_log_prob_returns_logit},
