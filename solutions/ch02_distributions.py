@@ -24,7 +24,8 @@ EXERCISES = [
     "gaussian_entropy",
     "gaussian_entropy_backward",
 ]
-LOG_2PI = float(np.log(2.0 * np.pi))
+
+LOG_2PI = float(np.log(2.0 * np.pi))  # log 2π, in every Gaussian log-density
 
 
 def log_softmax(logits: np.ndarray) -> np.ndarray:

@@ -68,7 +68,7 @@ def ppo_update(agent, optimizer, data: dict, config, rng: np.random.Generator) -
     """K epochs of minibatch updates on one batch (Algorithm 1's inner optimisation).
 
     data: a dict of arrays with the same n rows (the keys of loss_and_grad's minibatch, and perhaps more).
-    optimizer: has step(grads), one descent step of agent.params along grads (a minippo.optimizer.Adam).
+    optimizer: has step(grads), one descent step of agent.params given the loss gradient (a minippo.optimizer.Adam).
     config: uses epochs (K), minibatch_size (M), shuffle_minibatches, grad_norm_clipping, max_grad_norm, and what
     loss_and_grad uses.  rng: a NumPy Generator for the shuffling.
     For each of the K epochs: order = rng.permutation(n) if config.shuffle_minibatches, else 0 … n−1; cut it into
