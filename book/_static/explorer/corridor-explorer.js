@@ -12,7 +12,10 @@
   "use strict";
   if (typeof document === "undefined") return; // required by Node: nothing to draw
 
-  const SCRIPT = document.currentScript;
+  const SCRIPT =
+    document.currentScript ||
+    Array.prototype.find.call(document.scripts, (tag) => /corridor-explorer\.js/.test(tag.src)) ||
+    null;
   const COLORS = { clay: "#c8643b", sage: "#7d9a72", ink: "#2f2a26", slate: "#4f6d8f" };
   const STEP_SIZES = [0.03, 0.05, 0.1, 0.2, 0.3, 0.5, 1, 2, 3, 5, 10];
   const SPEEDS = [1, 2, 5, 10, 20, 40, 80, 160, 320];
