@@ -111,7 +111,9 @@ def mujoco_verdict(stats: dict[str, dict]) -> str:
         f"end of the read-off range) on {len(above)} of them"
         + (f" ({', '.join(above)})" if above else "")
         + f". Each run is {', '.join(f'{s:,} steps ({s // 2048} updates of 2048)' for s in steps)}; its return is "
-        "the mean of its last 100 training episodes."
+        "the mean of its last 100 training episodes. The steps/s and minutes are the trainer's own clock while two "
+        "trainings (and other people's jobs) shared the two cores, so they understate minippo's speed on a quiet "
+        "machine; the speed race below measures that."
     )
 
 
