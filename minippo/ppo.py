@@ -55,9 +55,9 @@ PROGRESS_FIELDS = [
 class Config:
     """Defaults are the paper's MuJoCo settings (Table 3) and the "37 details" (Huang et al. 2022)."""
 
-    env_id: str = "Hopper-v5"
-    total_steps: int = 1_000_000
-    seed: int = 1
+    env_id: str = "Hopper-v5"  # any Gymnasium id with flat Box observations and Discrete or Box actions
+    total_steps: int = 1_000_000  # environment steps in all (the paper: 1M for MuJoCo)
+    seed: int = 1  # seeds the initialisation, the action noise, the minibatch order and the environments
     objective: str = "clip"  # clip (eq. 7) | cpi (eq. 6, no clipping or penalty) | klpen (eq. 8) | pg (eq. 2)
     # Algorithm 1
     num_envs: int = 1  # N actors
@@ -75,28 +75,28 @@ class Config:
     value_coef: float = 0.5  # c1
     entropy_coef: float = 0.0  # c2 (the paper uses none for MuJoCo)
     shared_network: bool = False  # one tanh trunk, a policy head and a value head
-    hidden_sizes: tuple = (64, 64)
+    hidden_sizes: tuple = (64, 64)  # two tanh layers of 64, for the policy and for the value network
     dtype: str = "float32"  # the networks' floats; float32 halves the cost of tanh and matmul (tests use float64)
-    log_std_init: float = 0.0
+    log_std_init: float = 0.0  # the Gaussian policy starts with σ = e^0 = 1 for every action
     # the implementation details, each a switch
-    lr: float = 3e-4
-    adam_eps: float = 1e-5
-    anneal_lr: bool = True
+    lr: float = 3e-4  # Adam step size α (the paper's Table 3)
+    adam_eps: float = 1e-5  # Adam's ε in the denominator (PyTorch's default is 1e-8)
+    anneal_lr: bool = True  # α falls linearly to 0 over the run
     use_gae: bool = True  # False: Â = discounted return − V (λ = 1)
-    shuffle_minibatches: bool = True
+    shuffle_minibatches: bool = True  # a new random order of the batch every epoch
     normalize_advantages: bool = True  # per minibatch
-    clip_value_loss: bool = True
-    grad_norm_clipping: bool = True
-    max_grad_norm: float = 0.5
-    orthogonal_init: bool = True
-    normalize_observations: bool = True
-    obs_clip: float = 10.0
-    scale_rewards: bool = True
-    reward_clip: float = 10.0
+    clip_value_loss: bool = True  # V may move at most ±ε from the rollout's value (pessimistic max)
+    grad_norm_clipping: bool = True  # scale the whole gradient down to norm max_grad_norm when larger
+    max_grad_norm: float = 0.5  # the global norm limit
+    orthogonal_init: bool = True  # orthogonal weights (gain √2, 0.01, 1), zero biases; else LeCun-uniform
+    normalize_observations: bool = True  # running mean/std of observations, updated between batches
+    obs_clip: float = 10.0  # normalised observations are clipped to ±obs_clip
+    scale_rewards: bool = True  # divide rewards by the running std of the discounted return
+    reward_clip: float = 10.0  # scaled rewards are clipped to ±reward_clip
     clip_actions: bool = True  # clip to the action bounds when stepping; the unclipped action is stored
     target_kl: float | None = None  # stop the epochs early once approx KL exceeds this (off in the paper)
     checkpoint_every: int = 10  # updates between checkpoints (for --resume and for NaN recovery)
-    extra: dict = field(default_factory=dict)
+    extra: dict = field(default_factory=dict)  # free-form notes stored in config.json
 
     @property
     def batch_size(self) -> int:
