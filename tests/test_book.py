@@ -7,7 +7,7 @@ import pytest
 from conftest import ROOT
 
 TOC = ROOT / "book" / "_toc.yml"
-CHAPTERS = re.findall(r"file:\s*(\S+)", TOC.read_text())
+CHAPTERS = re.findall(r"(?:root|file):\s*(\S+)", TOC.read_text())
 NUMBERED = [name for name in CHAPTERS if re.match(r"\d\d-", name)]
 
 

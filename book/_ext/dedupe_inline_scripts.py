@@ -6,7 +6,7 @@ def _keep_first_of_each_script(app, pagename, templatename, context, doctree):
     seen, unique = set(), []
     for script in context.get("script_files", []):
         attributes = tuple(sorted(getattr(script, "attributes", {}).items()))
-        key = (getattr(script, "filename", None) or str(script), attributes)
+        key = (getattr(script, "filename", None) or "", attributes)  # inline scripts: None or "", by their body
         if key not in seen:
             seen.add(key)
             unique.append(script)
