@@ -11,17 +11,23 @@ from __future__ import annotations
 import numpy as np
 
 
+def mean(x) -> float:
+    """Ê[x], the average over the minibatch, as a Python float: Σ x / n. (np.mean computes the same, but its
+    Python-level bookkeeping costs four times the sum itself on a minibatch of 64, several times per minibatch.)"""
+    return float(x.sum()) / x.size
+
+
 def pg_objective(logp, advantages):
     """L^PG = Ê[log π_θ(a_t|s_t) Â_t] (eq. 2); ∂L/∂ log π_t = Â_t / n."""
     n = len(logp)
-    return float(np.mean(logp * advantages)), advantages / n
+    return mean(logp * advantages), advantages / n
 
 
 def cpi_objective(logp, logp_old, advantages):
     """L^CPI = Ê[r_t Â_t] (eq. 6); ∂L/∂ log π_t = r_t Â_t / n."""
     n = len(logp)
     ratio = np.exp(logp - logp_old)
-    return float(np.mean(ratio * advantages)), ratio * advantages / n
+    return mean(ratio * advantages), ratio * advantages / n
 
 
 def clip_objective(logp, logp_old, advantages, epsilon: float):
@@ -36,7 +42,7 @@ def clip_objective(logp, logp_old, advantages, epsilon: float):
     unclipped = ratio * advantages
     clipped = np.clip(ratio, 1.0 - epsilon, 1.0 + epsilon) * advantages
     active = unclipped <= clipped
-    return float(np.mean(np.minimum(unclipped, clipped))), np.where(active, unclipped, 0.0) / n
+    return mean(np.minimum(unclipped, clipped)), np.where(active, unclipped, 0.0) / n
 
 
 def kl_penalty_objective(logp, logp_old, advantages, kl, beta: float):
@@ -46,7 +52,7 @@ def kl_penalty_objective(logp, logp_old, advantages, kl, beta: float):
     """
     n = len(logp)
     value, grad_logp = cpi_objective(logp, logp_old, advantages)
-    return value - beta * float(np.mean(kl)), grad_logp, np.full(n, -beta / n)
+    return value - beta * mean(kl), grad_logp, np.full(n, -beta / n, dtype=logp.dtype)
 
 
 def adaptive_beta(beta: float, kl: float, kl_target: float) -> float:
@@ -67,32 +73,32 @@ def value_loss(values, value_targets, values_old=None, clip_epsilon: float | Non
     n = len(values)
     error = values - value_targets
     if clip_epsilon is None:
-        return 0.5 * float(np.mean(error * error)), error / n
-    clipped_values = values_old + np.clip(values - values_old, -clip_epsilon, clip_epsilon)
-    clipped_error = clipped_values - value_targets
-    use_clipped = clipped_error * clipped_error > error * error
+        return 0.5 * mean(error * error), error / n
+    moved = values - values_old
+    clipped_error = values_old + np.clip(moved, -clip_epsilon, clip_epsilon) - value_targets
+    squared, clipped_squared = error * error, clipped_error * clipped_error
+    use_clipped = clipped_squared > squared
     # the clipped value is flat in V outside ±ε, so its branch passes a gradient only inside the band
-    inside = np.abs(values - values_old) <= clip_epsilon
+    inside = np.abs(moved) <= clip_epsilon
     grad = np.where(use_clipped, np.where(inside, clipped_error, 0.0), error) / n
-    loss = 0.5 * float(np.mean(np.maximum(error * error, clipped_error * clipped_error)))
-    return loss, grad
+    return 0.5 * mean(np.maximum(squared, clipped_squared)), grad
 
 
 def entropy_bonus(entropy):
     """S = Ê[S[π_θ](s_t)] (eq. 9's bonus); ∂S/∂S_t = 1/n."""
     n = len(entropy)
-    return float(np.mean(entropy)), np.full(n, 1.0 / n)
+    return mean(entropy), np.full(n, 1.0 / n, dtype=entropy.dtype)
 
 
 def approx_kl(logp, logp_old) -> float:
     """An estimate of KL[π_old ‖ π] from samples of π_old: Ê[(r − 1) − log r], unbiased and ≥ 0 (Schulman 2020)."""
     log_ratio = logp - logp_old
-    return float(np.mean(np.expm1(log_ratio) - log_ratio))
+    return mean(np.expm1(log_ratio) - log_ratio)
 
 
 def clip_fraction(logp, logp_old, epsilon: float) -> float:
     """The fraction of samples whose ratio left the band [1−ε, 1+ε]."""
-    return float(np.mean(np.abs(np.exp(logp - logp_old) - 1.0) > epsilon))
+    return mean(np.abs(np.exp(logp - logp_old) - 1.0) > epsilon)
 
 
 def explained_variance(predictions, targets) -> float:

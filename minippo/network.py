@@ -28,24 +28,31 @@ def orthogonal(shape: tuple[int, int], gain: float, rng: np.random.Generator) ->
 
 
 def linear_forward(x: np.ndarray, W: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """y = x W + b, for a batch x of shape (n, in)."""
-    return x @ W + b
+    """y = x W + b, for a batch x of shape (n, in).
+
+    ``x.dot(W)`` is ``x @ W``; on the rollout's one-row inputs its call costs half as much (0.7 µs against 1.4).
+    """
+    return x.dot(W) + b
 
 
 def linear_backward(x: np.ndarray, W: np.ndarray, grad_y: np.ndarray, need_grad_x: bool = True):
     """Given dL/dy, return (dL/dx, dL/dW, dL/db): dL/dW = xᵀ dL/dy, dL/db = Σ_n dL/dy, dL/dx = dL/dy Wᵀ."""
-    grad_W = x.T @ grad_y
+    grad_W = x.T.dot(grad_y)
     grad_b = grad_y.sum(axis=0)
-    grad_x = grad_y @ W.T if need_grad_x else None
+    grad_x = grad_y.dot(W.T) if need_grad_x else None
     return grad_x, grad_W, grad_b
 
 
 def tanh_forward(z: np.ndarray) -> np.ndarray:
-    """h = tanh(z), computed as 1 − 2/(e^{2z} + 1).
+    """h = tanh(z). In float64 it is computed as 1 − 2/(e^{2z} + 1).
 
-    The same function to within 4e-16, but NumPy's vectorised exp is about twice as fast as its tanh in float64,
-    and tanh is the most expensive operation of a minibatch update. e^{2z} = inf gives 1 and e^{2z} = 0 gives −1.
+    In float64 that is the same function to within 4e-16, and NumPy's vectorised exp is about twice as fast as its
+    tanh (a minibatch of 64 × 64: 31 µs against 56 µs); e^{2z} = inf gives 1 and e^{2z} = 0 gives −1. In float32,
+    the training default, np.tanh itself is as fast (11 µs against 13 µs) and has no overhead on the one-row
+    forward passes of the rollout (0.7 µs against 6 µs), so it is used as it is.
     """
+    if z.dtype != np.float64:
+        return np.tanh(z)
     with np.errstate(over="ignore"):
         h = np.exp(2.0 * z)
     h += 1.0

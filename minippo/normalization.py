@@ -54,7 +54,9 @@ class ObservationNormalizer:
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         if not self.enabled:
             return np.asarray(obs, dtype=np.float64)
-        return np.clip((obs - self._shift) * self._scale, -self.clip, self.clip)
+        z = (obs - self._shift) * self._scale
+        np.maximum(z, -self.clip, out=z)  # np.minimum(np.maximum(·)) is np.clip without its wrapper's overhead,
+        return np.minimum(z, self.clip, out=z)  # which counts on the rollout's one-row calls
 
     def update(self, raw_obs: np.ndarray) -> None:
         """Fold a batch of raw observations into the statistics. The rollout calls this once per batch, so every
@@ -82,12 +84,13 @@ class RewardScaler:
         rewards = np.asarray(rewards, dtype=np.float64)
         if not self.enabled:
             return rewards
-        returns = np.empty_like(rewards)
-        discounted = self.discounted
-        for t in range(len(rewards)):
-            discounted = self.gamma * discounted + rewards[t]
-            returns[t] = discounted
-            discounted = np.where(episode_ends[t], 0.0, discounted)
-        self.discounted = discounted
-        self.stats.update(returns)
+        returns = []  # G_t of every step, on Python floats one row at a time (see advantages.gae)
+        discounted = self.discounted.tolist()
+        for row, ends in zip(rewards.tolist(), np.asarray(episode_ends, dtype=bool).tolist()):
+            discounted = [self.gamma * g + r for g, r in zip(discounted, row)]
+            returns.append(discounted)
+            if any(ends):
+                discounted = [0.0 if end else g for g, end in zip(discounted, ends)]
+        self.discounted = np.array(discounted)
+        self.stats.update(np.array(returns))
         return np.clip(rewards / np.sqrt(self.stats.var + 1e-8), -self.clip, self.clip)

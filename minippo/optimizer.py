@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -29,19 +31,24 @@ class Adam:
     def step(self, grads: np.ndarray) -> None:
         """One descent step along ``grads`` (the gradient of the loss to minimise)."""
         self.t += 1
+        scratch = self._scratch  # every pass writes into a buffer: no temporary arrays, all in the params' dtype
         self.m *= self.beta1
-        self.m += (1.0 - self.beta1) * grads
+        self.m += np.multiply(grads, 1.0 - self.beta1, out=scratch)
         self.v *= self.beta2
-        self.v += (1.0 - self.beta2) * (grads * grads)
+        np.multiply(grads, grads, out=scratch)
+        scratch *= 1.0 - self.beta2
+        self.v += scratch
         if self.bias_correction:
-            step = self.lr * np.sqrt(1.0 - self.beta2**self.t) / (1.0 - self.beta1**self.t)
-            eps = self.eps * np.sqrt(1.0 - self.beta2**self.t)
+            step = self.lr * math.sqrt(1.0 - self.beta2**self.t) / (1.0 - self.beta1**self.t)
+            eps = self.eps * math.sqrt(1.0 - self.beta2**self.t)
         else:
             step, eps = self.lr, self.eps
         # θ −= α m̂ / (√v̂ + eps), with the corrections folded into the step and eps (same algebra, fewer passes)
-        denom = np.sqrt(self.v, out=self._scratch)
+        denom = np.sqrt(self.v, out=scratch)
         denom += eps
-        self.params -= step * self.m / denom
+        np.divide(self.m, denom, out=scratch)
+        scratch *= step
+        self.params -= scratch
 
     def state_dict(self) -> dict:
         return {"m": self.m.copy(), "v": self.v.copy(), "t": np.array(self.t)}

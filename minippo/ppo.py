@@ -15,6 +15,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+import math
 import os
 import time
 from dataclasses import dataclass, field
@@ -166,7 +167,8 @@ def loss_and_grad(agent: ActorCritic, mb: dict, config: Config, kl_beta: float =
     logp = dist.log_prob(mb["actions"])
     advantages = mb["advantages"]
     if config.normalize_advantages and len(advantages) > 1:
-        advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
+        centered = advantages - losses.mean(advantages)  # (Â − mean) / (std + 1e-8), std = √Ê[(Â − mean)²]
+        advantages = centered / (math.sqrt(losses.mean(centered * centered)) + 1e-8)
 
     grad_kl = None
     if config.objective == "clip":
@@ -280,10 +282,10 @@ class Trainer:
         stats = []  # optimise the surrogate for K epochs with minibatches of M
         for epoch in range(config.epochs):
             order = self.rng.permutation(n) if config.shuffle_minibatches else np.arange(n)
+            shuffled = {key: value[order] for key, value in data.items()}  # one gather per epoch, then slices
             epoch_kl = []
             for start in range(0, n, config.minibatch_size):
-                index = order[start : start + config.minibatch_size]
-                minibatch = {key: value[index] for key, value in data.items()}
+                minibatch = {key: value[start : start + config.minibatch_size] for key, value in shuffled.items()}
                 try:
                     step = update_minibatch(agent, self.optimizer, minibatch, config, self.kl_beta)
                 except NonFiniteError as error:
@@ -297,8 +299,7 @@ class Trainer:
                 break
 
         # how far θ moved from θ_old over the whole batch; eq. 8 adapts β from it
-        out, _, _ = agent.forward(data["obs"])
-        dist = agent.distribution(out)
+        dist = agent.distribution(agent.policy_output(data["obs"]))
         logp = dist.log_prob(data["actions"])
         kl = float(np.mean(dist.kl(agent.distribution(data["policy_out"]))))
         if config.objective == "klpen" and config.adaptive_kl:
