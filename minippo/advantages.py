@@ -46,12 +46,14 @@ def gae(rewards, values, next_values, terminated, truncated, gamma: float, lam: 
     episode_ends = np.asarray(terminated, dtype=bool) | np.asarray(truncated, dtype=bool)
     carry = 1.0 - episode_ends.astype(np.float64)
     decay = gamma * lam
-    # The recurrence runs backwards over t on Python floats, one row of N environments at a time: with N = 1,
-    # NumPy's per-call overhead would cost more than the arithmetic.
+    # The recurrence runs backwards over t on plain Python floats, one environment (column) at a time: on one
+    # number per step, NumPy's per-call overhead would cost ten times the arithmetic.
     T = len(deltas)
-    following = [0.0] * (deltas.size // T)
-    rows = []
-    for delta, keep in zip(deltas.reshape(T, -1)[::-1].tolist(), carry.reshape(T, -1)[::-1].tolist()):
-        following = [d + decay * k * f for d, k, f in zip(delta, keep, following)]  # Â_t = δ_t + γλ Â_{t+1}
-        rows.append(following)
-    return np.array(rows[::-1]).reshape(deltas.shape)
+    advantages = np.empty((T, deltas.size // T))
+    for i, (delta, keep) in enumerate(zip(deltas.reshape(T, -1).T.tolist(), carry.reshape(T, -1).T.tolist())):
+        column, following = [0.0] * T, 0.0
+        for t in range(T - 1, -1, -1):
+            following = delta[t] + decay * keep[t] * following  # Â_t = δ_t + γλ Â_{t+1}
+            column[t] = following
+        advantages[:, i] = column
+    return advantages.reshape(deltas.shape)

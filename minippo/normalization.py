@@ -84,13 +84,17 @@ class RewardScaler:
         rewards = np.asarray(rewards, dtype=np.float64)
         if not self.enabled:
             return rewards
-        returns = []  # G_t of every step, on Python floats one row at a time (see advantages.gae)
-        discounted = self.discounted.tolist()
-        for row, ends in zip(rewards.tolist(), np.asarray(episode_ends, dtype=bool).tolist()):
-            discounted = [self.gamma * g + r for g, r in zip(discounted, row)]
-            returns.append(discounted)
-            if any(ends):
-                discounted = [0.0 if end else g for g, end in zip(discounted, ends)]
-        self.discounted = np.array(discounted)
-        self.stats.update(np.array(returns))
+        # G_t of every step, on plain Python floats one environment at a time (see advantages.gae)
+        T = len(rewards)
+        returns = np.empty((T, len(self.discounted)))
+        ends = np.asarray(episode_ends, dtype=bool).reshape(T, -1).T.tolist()
+        for i, (column, ended) in enumerate(zip(rewards.reshape(T, -1).T.tolist(), ends)):
+            discounted = float(self.discounted[i])
+            for t in range(T):
+                discounted = self.gamma * discounted + column[t]  # G ← γ G + r
+                returns[t, i] = discounted
+                if ended[t]:
+                    discounted = 0.0
+            self.discounted[i] = discounted
+        self.stats.update(returns)
         return np.clip(rewards / np.sqrt(self.stats.var + 1e-8), -self.clip, self.clip)

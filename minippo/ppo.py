@@ -209,7 +209,7 @@ def update_minibatch(agent: ActorCritic, optimizer: Adam, mb: dict, config: Conf
         norm = clip_grad_norm(agent.grads, config.max_grad_norm)
     else:
         norm = float(np.sqrt(agent.grads @ agent.grads))
-    if not (np.isfinite(norm) and np.isfinite(loss)):
+    if not (math.isfinite(norm) and math.isfinite(loss)):
         raise NonFiniteError("non-finite loss or gradient")
     optimizer.step(agent.grads)
     return stats
@@ -282,7 +282,7 @@ class Trainer:
         stats = []  # optimise the surrogate for K epochs with minibatches of M
         for epoch in range(config.epochs):
             order = self.rng.permutation(n) if config.shuffle_minibatches else np.arange(n)
-            shuffled = {key: value[order] for key, value in data.items()}  # one gather per epoch, then slices
+            shuffled = {key: value.take(order, axis=0) for key, value in data.items()}  # one gather an epoch
             epoch_kl = []
             for start in range(0, n, config.minibatch_size):
                 minibatch = {key: value[start : start + config.minibatch_size] for key, value in shuffled.items()}
