@@ -1,6 +1,6 @@
 """The speed race on one machine, in one process: raw environment stepping, minippo, and Stable-Baselines3 PPO.
 
-    python benchmarks/speed.py                    # Hopper-v5, 3 interleaved rounds -> benchmarks/results/speed.csv
+    python benchmarks/speed.py                    # Hopper-v5, 5 interleaved rounds -> benchmarks/results/speed.csv
 
 Each round measures, one after the other:
   raw        random actions in ``gym.make(ENV)`` (its defaults), resetting at episode ends: the ceiling, since any
@@ -161,7 +161,7 @@ def summarize(env_id: str, rounds: dict[str, list[float]], steps: dict[str, int]
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--env", default="Hopper-v5")
-    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--updates", type=int, default=3, help="timed updates per round for each trainer")
     parser.add_argument("--raw-steps", type=int, default=20_000, help="random steps per round for raw stepping")
     parser.add_argument("--seed", type=int, default=1)
