@@ -1,7 +1,8 @@
 """Turn the benchmark records into benchmarks/results/summary.md and its figures.
 
     python benchmarks/summary.py                 # summary.md, mujoco_curves.png, table1.png
-    python benchmarks/summary.py --table-only    # print only the seven-task table (the README's)
+    python benchmarks/summary.py --table-only    # print only the seven-task table
+    python benchmarks/summary.py --readme        # rewrite the README's generated blocks from the records
 
 Reads only committed records: results/mujoco.csv and the run folders' progress.csv (learning curves),
 results/table1.csv and results/random.csv, results/speed.csv. Nothing in the output is typed in except the
@@ -117,6 +118,27 @@ def mujoco_verdict(stats: dict[str, dict]) -> str:
     )
 
 
+def table1_verdict(table: list[dict]) -> str:
+    """Where the paper's two landmarks rank here: clipping at ε = 0.2 (the paper's best) and no clipping (its worst)."""
+    ranked = sorted(table, key=lambda row: -float(row["score"]))
+    names = [row["setting"] for row in ranked]
+    best, worst = ranked[0], ranked[-1]
+    text = (
+        f"Best here: {best['setting']} ({float(best['score']):.2f}); worst: {worst['setting']} "
+        f"({float(worst['score']):.2f}). In the paper: Clipping, ε = 0.2 best (0.82), no clipping worst (−0.39)."
+    )
+    clip, none = "Clipping, ε = 0.2", "No clipping or penalty"
+    if clip in names and none in names:
+        clip_rank, none_rank = names.index(clip) + 1, names.index(none) + 1
+        reproduced = clip_rank == 1 and none_rank == len(names)
+        verdict = "is reproduced." if reproduced else "is not reproduced at this scale."
+        text += (
+            f" Here Clipping, ε = 0.2 ranks {clip_rank} of {len(names)} and no clipping {none_rank} of {len(names)}: "
+            f"the paper's ordering {verdict}"
+        )
+    return text
+
+
 def table1_lines(table: list[dict], randoms: list[dict]) -> list[str]:
     if not table:
         return ["No Table 1 runs are recorded yet."]
@@ -131,13 +153,7 @@ def table1_lines(table: list[dict], randoms: list[dict]) -> list[str]:
         lines.append(
             f"| {row['setting']} | {float(row['score']):.2f} | {row['runs']} | {float(row['paper_score']):.2f} |"
         )
-    best = max(table, key=lambda row: float(row["score"]))
-    worst = min(table, key=lambda row: float(row["score"]))
-    lines += [
-        "",
-        f"Best here: {best['setting']} ({float(best['score']):.2f}); worst: {worst['setting']} "
-        f"({float(worst['score']):.2f}). In the paper: Clipping, ε = 0.2 best (0.82), no clipping worst (−0.39).",
-    ]
+    lines += ["", table1_verdict(table)]
     if randoms:
         lines += [
             "",
@@ -173,6 +189,57 @@ def speed_lines(rows: list[dict]) -> list[str]:
         )
     lines += ["", f"Command: `{first['command']}`"]
     return lines
+
+
+def speed_sentence(rows: list[dict]) -> str:
+    """The README's paragraph on the speed race, from speed.csv."""
+    by_name = {row["contender"]: row for row in rows}
+    if "minippo" not in by_name or not by_name["minippo"]["steps_per_s"]:
+        return "The speed race has not been run yet (`python benchmarks/speed.py`)."
+    mine, raw, sb3 = by_name["minippo"], by_name.get("raw"), by_name.get("sb3")
+    rounds = len(mine["rounds"].split(";"))
+    text = (
+        f"Speed on {mine['env']} with the paper's settings, measured in one process by `{mine['command']}` "
+        f"(`benchmarks/results/speed.csv`, median of {rounds} interleaved rounds, {mine['machine']}, {mine['date']}, "
+        f"commit {mine['commit']}): minippo trains at {float(mine['steps_per_s']):.0f} steps/s"
+    )
+    if sb3 and sb3["steps_per_s"]:
+        text += (
+            f", {float(mine['vs_sb3']):.2f}× Stable-Baselines3 PPO with the same settings and one torch thread "
+            f"({float(sb3['steps_per_s']):.0f} steps/s)"
+        )
+    else:
+        text += " (Stable-Baselines3 was not measured: " + (sb3["version"] if sb3 else "no row") + ")"
+    if raw and raw["steps_per_s"]:
+        text += (
+            f", and {float(mine['vs_raw']):.2f}× raw environment stepping with random actions "
+            f"({float(raw['steps_per_s']):.0f} steps/s)"
+        )
+    return text + "."
+
+
+def readme_blocks(results) -> dict[str, str]:
+    """The README's generated blocks, by name: the seven-task table, the speed paragraph, Table 1."""
+    results = Path(results)
+    stats = task_stats(records.read_rows(results / "mujoco.csv"))
+    table1 = records.read_rows(results / "table1.csv")
+    return {
+        "mujoco": "\n".join(mujoco_table(stats)),
+        "speed": speed_sentence(records.read_rows(results / "speed.csv")),
+        "table1": "\n".join(table1_lines(table1, [])),
+    }
+
+
+def fill_readme(text: str, blocks: dict[str, str]) -> str:
+    """Replace what stands between ``<!-- summary:NAME -->`` and ``<!-- /summary:NAME -->`` with block NAME."""
+    for name, block in blocks.items():
+        start, end = f"<!-- summary:{name} -->", f"<!-- /summary:{name} -->"
+        if start not in text or end not in text.split(start, 1)[1]:
+            raise records.BenchmarkError(f"README.md has no generated block '{name}' ({start} … {end})")
+        head, rest = text.split(start, 1)
+        _, tail = rest.split(end, 1)
+        text = f"{head}{start}\n{block}\n{end}{tail}"
+    return text
 
 
 def progress_curves(folder) -> tuple[list[float], list[float]] | None:
@@ -300,6 +367,7 @@ def main(argv=None) -> int:
     parser.add_argument("--results", default=str(records.RESULTS), help="the folder of the CSV records")
     parser.add_argument("--runs", default=str(records.RUNS / "mujoco"), help="the seven-task run folders")
     parser.add_argument("--table-only", action="store_true", help="print the seven-task table and stop")
+    parser.add_argument("--readme", action="store_true", help="rewrite the README's generated blocks and stop")
     args = parser.parse_args(argv)
     results = Path(args.results)
     if not results.is_dir():
@@ -307,6 +375,14 @@ def main(argv=None) -> int:
     text, table = build(results, args.runs)
     if args.table_only:
         print("\n".join(table))
+        return 0
+    if args.readme:
+        readme = records.ROOT / "README.md"
+        try:
+            readme.write_text(fill_readme(readme.read_text(), readme_blocks(results)))
+        except records.BenchmarkError as error:
+            records.fail(str(error))
+        print(f"rewrote the generated blocks of {records.relative(readme)}")
         return 0
     (results / "summary.md").write_text(text)
     plot_mujoco(records.read_rows(results / "mujoco.csv"), args.runs, results / "mujoco_curves.png")

@@ -309,3 +309,35 @@ def test_summary_from_a_tiny_fixture(tmp_path):
     assert "No Table 1 runs are recorded yet." in text and "has not been run yet" in text
     assert (results / "mujoco_curves.png").stat().st_size > 0
     assert not (results / "table1.png").exists()
+
+
+# the README's results come from the records
+
+
+def test_the_readme_shows_what_the_committed_records_say():
+    readme = records.ROOT / "README.md"
+    text = readme.read_text()
+    blocks = summary.readme_blocks(records.RESULTS)
+    assert set(blocks) == {"mujoco", "speed", "table1"}
+    assert summary.fill_readme(text, blocks) == text, "run `python benchmarks/summary.py --readme`"
+
+
+def test_readme_blocks_are_replaced_and_a_missing_block_is_named():
+    text = "intro\n<!-- summary:speed -->\nold\nlines\n<!-- /summary:speed -->\nrest\n"
+    expected = "intro\n<!-- summary:speed -->\nnew\n<!-- /summary:speed -->\nrest\n"
+    assert summary.fill_readme(text, {"speed": "new"}) == expected
+    with pytest.raises(records.BenchmarkError, match="table1"):
+        summary.fill_readme(text, {"table1": "x"})
+
+
+def test_table1_verdict_reads_the_ranks():
+    def table(scores):
+        return [{"setting": name, "score": score} for name, score in scores.items()]
+
+    paper_like = table({"Clipping, ε = 0.2": 0.8, "Clipping, ε = 0.1": 0.7, "No clipping or penalty": -0.4})
+    assert "ranks 1 of 3 and no clipping 3 of 3: the paper's ordering is reproduced." in summary.table1_verdict(
+        paper_like
+    )
+    other = table({"Clipping, ε = 0.2": 0.7, "Clipping, ε = 0.1": 0.8, "No clipping or penalty": -0.4})
+    verdict = summary.table1_verdict(other)
+    assert "ranks 2 of 3 and no clipping 3 of 3: the paper's ordering is not reproduced" in verdict
