@@ -85,6 +85,16 @@ def normalized_scores(runs: list[dict], random_return: dict[str, float]) -> dict
     }
 
 
+def with_overrides(setting: tuple, overrides: list[str]) -> tuple:
+    """A row of SETTINGS with more ``--config`` overrides (KEY=VALUE) for its training."""
+    name, options, paper = setting
+    if not overrides:
+        return setting
+    if "--config" in options:
+        return name, [*options, *overrides], paper
+    return name, [*options, "--config", *overrides], paper
+
+
 def write_table(runs_csv, random_csv, table_csv, tasks, seeds, steps) -> list[dict]:
     """Score the recorded runs of ``tasks`` × ``seeds`` and (re)write table1.csv, in the paper's row order."""
     randoms = {
@@ -162,6 +172,10 @@ def main(argv=None) -> int:
     parser.add_argument("--envs", nargs="+", default=TASKS, metavar="ENV")
     parser.add_argument("--seeds", nargs="+", type=int, default=SEEDS)
     parser.add_argument("--steps", type=int, default=STEPS)
+    parser.add_argument("--settings", nargs="+", type=int, metavar="N", help="only these rows of Table 1 (1-11)")
+    parser.add_argument(
+        "--config", nargs="+", default=[], metavar="KEY=VALUE", help="extra Config overrides for every run"
+    )
     parser.add_argument("--score", action="store_true", help="only rewrite table1.csv from the recorded runs")
     parser.add_argument("--runs-csv", default=str(RUNS_CSV))
     parser.add_argument("--random-csv", default=str(random_policy.CSV_PATH))
@@ -170,6 +184,10 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if args.steps < 2048:
         records.fail(f"--steps must be at least one horizon (2048), not {args.steps}")
+    numbers = args.settings or range(1, len(SETTINGS) + 1)
+    if any(not 1 <= number <= len(SETTINGS) for number in numbers):
+        records.fail(f"--settings are row numbers of Table 1, from 1 to {len(SETTINGS)}")
+    settings = [with_overrides(SETTINGS[number - 1], args.config) for number in numbers]
     try:
         if not args.score:
             missing = [
@@ -199,7 +217,7 @@ def main(argv=None) -> int:
             claims = Path(args.runs) / ".claims"
             for env_id in args.envs:  # task by task, so that a partial table already covers whole tasks
                 for seed in args.seeds:
-                    for name, options, _ in SETTINGS:
+                    for name, options, _ in settings:
                         try:
                             status = run_one(name, options, env_id, seed, args.steps, args.runs_csv, args.runs, claims)
                         except records.BenchmarkError as error:

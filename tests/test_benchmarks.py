@@ -251,6 +251,20 @@ def test_runner_refuses_bad_input(capsys):
     assert "unknown task Hoper-v5" in capsys.readouterr().err
 
 
+def test_table1_overrides_join_each_settings_config():
+    cpi, clip = table1.SETTINGS[0], table1.SETTINGS[2]
+    extra = ["grad_norm_clipping=false", "anneal_lr=false"]
+    assert table1.with_overrides(cpi, extra)[1] == ["--objective", "cpi", "--config", *extra]
+    assert table1.with_overrides(clip, extra)[1] == ["--objective", "clip", "--config", "clip_epsilon=0.2", *extra]
+    assert table1.with_overrides(clip, []) == clip
+
+
+def test_table1_rejects_a_setting_outside_the_table(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        table1.main(["--settings", "12", "--score"])
+    assert exit_info.value.code != 0 and "from 1 to 11" in capsys.readouterr().err
+
+
 # speed table and summary
 
 
