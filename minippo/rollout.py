@@ -57,7 +57,7 @@ class Rollout:
             policy_out = np.empty((T, N, agent.act_dim), dtype=agent.dtype)
             noise = self.rng.standard_normal((T, N, agent.act_dim))  # drawn at once: same numbers, fewer calls
             scaled_noise = (np.exp(agent.log_std) * noise).astype(agent.dtype)  # σ z_t, in the policy's dtype
-            clipped = np.empty(N * agent.act_dim, dtype=agent.dtype).reshape(N, agent.act_dim)
+            clipped = np.empty((N, agent.act_dim), dtype=agent.dtype)  # the actions the environments get
         else:
             actions = np.empty((T, N), dtype=np.int64)
             policy_out = np.empty((T, N, agent.act_dim), dtype=agent.dtype)
@@ -113,8 +113,8 @@ class Rollout:
         return Batch(obs, actions, logp, policy_out, values, next_values, scaled, terminated, truncated)
 
     def _check(self, observation: np.ndarray, t: int) -> np.ndarray:
-        # o·o is finite exactly when every entry is, unless it overflows (entries beyond 1e154): one cheap call per
-        # step, and the entry-by-entry test only to tell those two apart
+        # o·o is finite exactly when every entry is, unless it overflows on huge entries: one cheap call per step,
+        # and the entry-by-entry test only to tell those two apart
         if not math.isfinite(observation.dot(observation)) and not np.isfinite(observation).all():
             raise NonFiniteError(f"non-finite observation from the environment at step {self.steps + t + 1}")
         return observation
