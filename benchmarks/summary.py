@@ -218,13 +218,27 @@ def speed_sentence(rows: list[dict]) -> str:
     return text + "."
 
 
+def recheck_lines(rows: list[dict]) -> list[str]:
+    """One sentence per task run again at a later commit (results/hopper_recheck.csv), with its seeds."""
+    lines = []
+    for env_id, stat in task_stats(rows).items():
+        commits = ", ".join(sorted({row["commit"] for row in rows if row["env"] == env_id}))
+        returns = ", ".join(f"{value:.0f}" for value in stat["returns"])
+        lines.append(
+            f"{env_id} trained again at commit {commits} (`benchmarks/results/hopper_recheck.csv`, seeds "
+            f"{', '.join(map(str, stat['seeds']))}): {returns}, mean {stat['mean']:.1f} ± {stat['std']:.1f}."
+        )
+    return lines
+
+
 def readme_blocks(results) -> dict[str, str]:
     """The README's generated blocks, by name: the seven-task table, the speed paragraph, Table 1."""
     results = Path(results)
     stats = task_stats(records.read_rows(results / "mujoco.csv"))
     table1 = records.read_rows(results / "table1.csv")
+    recheck = recheck_lines(records.read_rows(results / "hopper_recheck.csv"))
     return {
-        "mujoco": "\n".join(mujoco_table(stats)),
+        "mujoco": "\n".join(mujoco_table(stats) + ["", *recheck] if recheck else mujoco_table(stats)),
         "speed": speed_sentence(records.read_rows(results / "speed.csv")),
         "table1": "\n".join(table1_lines(table1, [])),
     }

@@ -355,3 +355,13 @@ def test_table1_verdict_reads_the_ranks():
     other = table({"Clipping, ε = 0.2": 0.7, "Clipping, ε = 0.1": 0.8, "No clipping or penalty": -0.4})
     verdict = summary.table1_verdict(other)
     assert "ranks 2 of 3 and no clipping 3 of 3: the paper's ordering is not reproduced" in verdict
+
+
+def test_the_recheck_sentence_gives_each_seed_and_the_commit():
+    rows = [
+        {"env": "Hopper-v5", "seed": str(seed), "steps": "999424", "return_mean": str(value), "steps_per_s": "1",
+         "wall_s": "1", "commit": "abc1234", "command": "c"}
+        for seed, value in ((2, 2100.0), (1, 2300.0))
+    ]
+    (line,) = summary.recheck_lines(rows)
+    assert "commit abc1234" in line and "seeds 1, 2): 2300, 2100, mean 2200.0 ± 141.4." in line
