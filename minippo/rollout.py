@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -113,8 +112,6 @@ class Rollout:
         return Batch(obs, actions, logp, policy_out, values, next_values, scaled, terminated, truncated)
 
     def _check(self, observation: np.ndarray, t: int) -> np.ndarray:
-        # o·o is finite exactly when every entry is, unless it overflows on huge entries: one cheap call per step,
-        # and the entry-by-entry test only to tell those two apart
-        if not math.isfinite(observation.dot(observation)) and not np.isfinite(observation).all():
+        if not np.isfinite(observation).all():
             raise NonFiniteError(f"non-finite observation from the environment at step {self.steps + t + 1}")
         return observation

@@ -12,6 +12,7 @@ from minippo.errors import NonFiniteError
 from minippo.normalization import ObservationNormalizer, RewardScaler, RunningMeanStd
 from minippo.optimizer import Adam
 from minippo.ppo import PROGRESS_FIELDS, loss_and_grad, update_minibatch
+from minippo.rollout import Rollout
 
 TIMING = {"steps_per_s", "wall_s"}
 
@@ -80,6 +81,17 @@ def test_a_nan_gradient_stops_before_the_parameters_change(rng):
     with pytest.raises(NonFiniteError):
         update_minibatch(agent, Adam(agent.params), mb, Config(), 1.0)
     assert np.array_equal(agent.params, before)
+
+
+@pytest.mark.filterwarnings("error")
+def test_the_observation_check_stops_nan_and_inf_and_nothing_else():
+    rollout = Rollout.__new__(Rollout)  # the check reads only the step count
+    rollout.steps = 4096
+    huge = np.array([1e200, -1e200, 3.0])  # finite, though its square overflows
+    assert rollout._check(huge, 0) is huge
+    for bad in (np.nan, np.inf, -np.inf):
+        with pytest.raises(NonFiniteError, match="at step 4100"):
+            rollout._check(np.array([1.0, bad, 2.0]), 3)
 
 
 def test_running_mean_std_matches_numpy(rng):
