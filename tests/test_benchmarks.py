@@ -348,13 +348,16 @@ def test_table1_verdict_reads_the_ranks():
     def table(scores):
         return [{"setting": name, "score": score} for name, score in scores.items()]
 
-    paper_like = table({"Clipping, ε = 0.2": 0.8, "Clipping, ε = 0.1": 0.7, "No clipping or penalty": -0.4})
-    assert "ranks 1 of 3 and no clipping 3 of 3: the paper's ordering is reproduced." in summary.table1_verdict(
+    names = [name for name, _, _ in table1.SETTINGS]
+    middle = {name: 0.5 for name in names[3:]}
+    paper_like = table({"Clipping, ε = 0.2": 0.8, "Clipping, ε = 0.1": 0.7, **middle, "No clipping or penalty": -0.4})
+    assert "ranks 1 of 11 and no clipping 11 of 11: the paper's ordering is reproduced." in summary.table1_verdict(
         paper_like
     )
-    other = table({"Clipping, ε = 0.2": 0.7, "Clipping, ε = 0.1": 0.8, "No clipping or penalty": -0.4})
-    verdict = summary.table1_verdict(other)
-    assert "ranks 2 of 3 and no clipping 3 of 3: the paper's ordering is not reproduced" in verdict
+    other = table({"Clipping, ε = 0.2": 0.7, "Clipping, ε = 0.1": 0.8, **middle, "No clipping or penalty": -0.4})
+    assert "the paper's ordering is not reproduced at this scale" in summary.table1_verdict(other)
+    partial = table({"Clipping, ε = 0.2": 0.8, "No clipping or penalty": -0.4})
+    assert "is not settled: only 2 of the 11 settings are recorded" in summary.table1_verdict(partial)
 
 
 def test_the_recheck_sentence_gives_each_seed_and_the_commit():
