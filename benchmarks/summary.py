@@ -246,7 +246,8 @@ def readme_blocks(results) -> dict[str, str]:
     table1_1m = records.read_rows(results / "table1_1m.csv")
     full_length = []
     if table1_1m:
-        heading = "The same table at the paper's 1M steps, on HalfCheetah-v5 alone:"
+        tasks = table1_1m[0]["scale"].split(";")[0].removeprefix("tasks ").split()
+        heading = f"The same table at the paper's 1M steps, on {' and '.join(tasks)}:"
         full_length = ["", heading, "", *table1_lines(table1_1m, [])]
     return {
         "mujoco": "\n".join(mujoco_table(stats) + ["", *recheck] if recheck else mujoco_table(stats)),
