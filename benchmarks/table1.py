@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import argparse
 import csv
+import math
+import statistics
 import subprocess
 import sys
 from collections import defaultdict
@@ -48,7 +50,7 @@ SEEDS = [1, 2, 3]
 STEPS = 250_000
 RANDOM_EPISODES, RANDOM_SEED = 100, 0
 RUN_FIELDS = ["setting", "env", "seed", "steps", "return_mean", "wall_s", "steps_per_s", "commit", "command"]
-TABLE_FIELDS = ["setting", "score", "paper_score", "runs", "tasks", "seeds", "steps", "scale"]
+TABLE_FIELDS = ["setting", "score", "score_se", "paper_score", "runs", "tasks", "seeds", "steps", "scale"]
 RUNS_CSV = records.RESULTS / "table1_runs.csv"
 TABLE_CSV = records.RESULTS / "table1.csv"
 RUN_ROOT = records.RUNS / "table1"
@@ -64,12 +66,14 @@ def slug(setting: str) -> str:
 def normalized_scores(runs: list[dict], random_return: dict[str, float]) -> dict[str, dict]:
     """Table 1's scoring. ``runs``: dicts with setting, env, return_mean. Per task, the random policy's return maps
     to 0 and the best run's return (over every setting and seed on that task) to 1; each setting's score is the
-    mean of its runs' normalised returns. Returns {setting: {"score", "runs", "tasks"}}."""
+    mean of its runs' normalised returns. Returns {setting: {"score", "se", "runs", "tasks"}}.
+
+    ``se`` is the standard error of the score from seed to seed: each task's sample variance over its seeds, pooled
+    as for a mean over tasks, √(Σ_k s_k²/n_k) / K for K tasks with n_k seeds each (None when a task has one seed)."""
     best: dict[str, float] = {}
     for run in runs:
         best[run["env"]] = max(best.get(run["env"], -float("inf")), float(run["return_mean"]))
-    per_setting = defaultdict(list)
-    tasks = defaultdict(set)
+    per_task = defaultdict(lambda: defaultdict(list))  # setting -> env -> normalised returns
     for run in runs:
         env_id = run["env"]
         if env_id not in random_return:
@@ -77,12 +81,16 @@ def normalized_scores(runs: list[dict], random_return: dict[str, float]) -> dict
         span = best[env_id] - random_return[env_id]
         if span <= 0:
             raise records.BenchmarkError(f"on {env_id} no run beats the random policy, so the score is undefined")
-        per_setting[run["setting"]].append((float(run["return_mean"]) - random_return[env_id]) / span)
-        tasks[run["setting"]].add(env_id)
-    return {
-        setting: {"score": sum(values) / len(values), "runs": len(values), "tasks": len(tasks[setting])}
-        for setting, values in per_setting.items()
-    }
+        per_task[run["setting"]][env_id].append((float(run["return_mean"]) - random_return[env_id]) / span)
+    scores = {}
+    for setting, tasks in per_task.items():
+        values = [value for task in tasks.values() for value in task]
+        se = None
+        if all(len(task) > 1 for task in tasks.values()):
+            pooled = sum(statistics.variance(task) / len(task) for task in tasks.values())
+            se = math.sqrt(pooled) / len(tasks)
+        scores[setting] = {"score": sum(values) / len(values), "se": se, "runs": len(values), "tasks": len(tasks)}
+    return scores
 
 
 def with_overrides(setting: tuple, overrides: list[str]) -> tuple:
@@ -122,6 +130,7 @@ def write_table(runs_csv, random_csv, table_csv, tasks, seeds, steps) -> list[di
             {
                 "setting": name,
                 "score": round(scores[name]["score"], 2),
+                "score_se": "" if scores[name]["se"] is None else round(scores[name]["se"], 2),
                 "paper_score": paper,
                 "runs": scores[name]["runs"],
                 "tasks": scores[name]["tasks"],

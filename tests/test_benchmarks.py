@@ -64,6 +64,17 @@ def test_normalized_scores_match_hand_computation():
     assert scores["cpi"]["score"] == pytest.approx((-0.4 + 0.5) / 2)
     assert scores["kl"]["score"] == pytest.approx((1.0 + 0.75) / 2)
     assert scores["clip"]["runs"] == 2 and scores["clip"]["tasks"] == 2
+    assert scores["clip"]["se"] is None  # one seed per task: no spread to measure
+
+
+def test_score_standard_error_pools_the_seeds_within_each_task():
+    randoms = {"A": 0.0, "B": 0.0}
+    returns = {"A": [100.0, 60.0, 80.0], "B": [10.0, 30.0]}  # best: 100 on A, 30 on B
+    runs = [{"setting": "s", "env": env, "return_mean": str(v)} for env, values in returns.items() for v in values]
+    score = table1.normalized_scores(runs, randoms)["s"]
+    # normalised: A 1.0, 0.6, 0.8 (variance 0.04 over 3 seeds); B 1/3, 1 (variance 2/9 over 2 seeds)
+    assert score["score"] == pytest.approx((1.0 + 0.6 + 0.8 + 1 / 3 + 1.0) / 5)
+    assert score["se"] == pytest.approx(((0.04 / 3 + (2 / 9) / 2) ** 0.5) / 2)
 
 
 def test_normalized_scores_average_over_seeds():
@@ -354,8 +365,13 @@ def test_table1_verdict_reads_the_ranks():
     assert "ranks 1 of 11 and no clipping 11 of 11: the paper's ordering is reproduced." in summary.table1_verdict(
         paper_like
     )
-    other = table({"Clipping, ε = 0.2": 0.7, "Clipping, ε = 0.1": 0.8, **middle, "No clipping or penalty": -0.4})
+    half = table({"Clipping, ε = 0.2": 0.7, "Clipping, ε = 0.1": 0.8, **middle, "No clipping or penalty": -0.4})
+    half_reproduced = "half reproduced: no clipping is last, as in the paper, but ε = 0.2 is not first (0.70 against"
+    assert half_reproduced in summary.table1_verdict(half)
+    other = table({"Clipping, ε = 0.2": 0.7, "Clipping, ε = 0.1": 0.8, **middle, "No clipping or penalty": 0.6})
     assert "the paper's ordering is not reproduced at this scale" in summary.table1_verdict(other)
+    with_errors = [dict(row, score_se="0.05") for row in half]
+    assert "(0.70 ± 0.05 against 0.80 ± 0.05)" in summary.table1_verdict(with_errors)
     partial = table({"Clipping, ε = 0.2": 0.8, "No clipping or penalty": -0.4})
     assert "is not settled: only 2 of the 11 settings are recorded" in summary.table1_verdict(partial)
 
