@@ -103,8 +103,17 @@ def with_overrides(setting: tuple, overrides: list[str]) -> tuple:
     return name, [*options, "--config", *overrides], paper
 
 
+def complete_tasks(runs: list[dict], tasks, seeds) -> list[str]:
+    """The tasks, in the order given, on which every recorded setting has a run for every seed: a task still being
+    run would score its finished settings against a best run that may not have come yet, so it waits."""
+    settings = {run["setting"] for run in runs}
+    done = {(run["setting"], run["env"], int(run["seed"])) for run in runs}
+    return [env_id for env_id in tasks if all((s, env_id, seed) in done for s in settings for seed in seeds)]
+
+
 def write_table(runs_csv, random_csv, table_csv, tasks, seeds, steps) -> list[dict]:
-    """Score the recorded runs of ``tasks`` × ``seeds`` and (re)write table1.csv, in the paper's row order."""
+    """Score the recorded runs of ``tasks`` × ``seeds`` and (re)write table1.csv, in the paper's row order. Only
+    the tasks whose runs are all recorded count, and the table's ``scale`` names them."""
     randoms = {
         row["env"]: float(row["return_mean"])
         for row in records.read_rows(random_csv)
@@ -117,6 +126,10 @@ def write_table(runs_csv, random_csv, table_csv, tasks, seeds, steps) -> list[di
     ]
     if not runs:
         raise records.BenchmarkError(f"no runs recorded in {records.relative(runs_csv)} yet")
+    tasks = complete_tasks(runs, tasks, seeds)
+    if not tasks:
+        raise records.BenchmarkError(f"no task has all its runs recorded in {records.relative(runs_csv)} yet")
+    runs = [row for row in runs if row["env"] in tasks]
     scores = normalized_scores(runs, randoms)
     scale = (
         f"tasks {' '.join(tasks)}; seeds {' '.join(str(seed) for seed in seeds)}; {(steps // 2048) * 2048:,} steps "

@@ -123,6 +123,24 @@ def test_write_table_keeps_the_paper_column_and_order(tmp_path):
     assert "4,096 steps" in written[0]["scale"] and "paper: 7 tasks" in written[0]["scale"]
 
 
+def test_write_table_scores_only_the_tasks_whose_runs_are_all_recorded(tmp_path):
+    def run(setting, env_id, seed, value):
+        return {"setting": setting, "env": env_id, "seed": seed, "steps": 4096, "return_mean": value, "wall_s": 1,
+                "steps_per_s": 1, "commit": "x", "command": "c"}
+
+    clip, cpi = "Clipping, ε = 0.2", "No clipping or penalty"
+    runs = [run(clip, "A", 1, 100.0), run(cpi, "A", 1, 50.0), run(clip, "A", 2, 80.0), run(cpi, "A", 2, 40.0)]
+    runs += [run(clip, "B", 1, 10.0)]  # B is still running: its best run may not have come yet
+    write_csv(tmp_path / "runs.csv", runs)
+    write_csv(tmp_path / "random.csv", [{"env": e, "episodes": 100, "seed": 0, "return_mean": 0.0} for e in "AB"])
+    args = tmp_path / "runs.csv", tmp_path / "random.csv", tmp_path / "t.csv"
+    table = table1.write_table(*args, ["A", "B"], [1, 2], 5000)
+    assert {row["setting"]: row["score"] for row in table} == {cpi: round((0.5 + 0.4) / 2, 2), clip: 0.9}
+    assert all(row["tasks"] == 1 and row["scale"].startswith("tasks A;") for row in table)
+    with pytest.raises(records.BenchmarkError, match="no task has all its runs"):
+        table1.write_table(*args, ["B"], [1, 2], 5000)
+
+
 def test_slug_makes_distinct_folder_names():
     slugs = [table1.slug(name) for name, _, _ in table1.SETTINGS]
     assert len(set(slugs)) == len(slugs)
