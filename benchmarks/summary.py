@@ -260,7 +260,8 @@ def readme_blocks(results) -> dict[str, str]:
     full_length = []
     if table1_1m:
         tasks = table1_1m[0]["scale"].split(";")[0].removeprefix("tasks ").split()
-        heading = f"The same table at the paper's 1M steps, on {' and '.join(tasks)}:"
+        names = ", ".join(tasks[:-1]) + " and " + tasks[-1] if len(tasks) > 1 else tasks[0]
+        heading = f"The same table at the paper's 1M steps, on {len(tasks)} of the paper's 7 tasks ({names}):"
         full_length = ["", heading, "", *table1_lines(table1_1m, [])]
     return {
         "mujoco": "\n".join(mujoco_table(stats) + ["", *recheck] if recheck else mujoco_table(stats)),
