@@ -394,6 +394,20 @@ def test_table1_verdict_reads_the_ranks():
     assert "is not settled: only 2 of the 11 settings are recorded" in summary.table1_verdict(partial)
 
 
+def test_the_later_code_table_reads_only_the_default_objective_runs():
+    def run(setting, seed, value):
+        return {"setting": setting, "env": "Hopper-v5", "seed": str(seed), "steps": "999424",
+                "return_mean": str(value), "wall_s": "60", "steps_per_s": "100", "commit": "abc1234"}
+
+    rows = [run("Clipping, ε = 0.2", seed, value) for seed, value in ((1, 2100), (2, 2300), (3, 2500))]
+    rows.append(run("No clipping or penalty", 1, 5))
+    text = "\n".join(summary.current_code_lines(rows))
+    assert "| Hopper-v5 | 2300.0 ± 200.0 (n = 3) | 2100, 2300, 2500 |" in text
+    assert "commits abc1234" in text and "1 of 7 tasks have 3 seeds recorded" in text
+    assert "on 1 of them (Hopper-v5)." in text
+    assert summary.current_code_lines([run("No clipping or penalty", 1, 5)]) == []
+
+
 def test_the_recheck_sentence_gives_each_seed_and_the_commit():
     rows = [
         {"env": "Hopper-v5", "seed": str(seed), "steps": "999424", "return_mean": str(value), "steps_per_s": "1",
