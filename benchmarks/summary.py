@@ -237,14 +237,14 @@ def speed_sentence(rows: list[dict]) -> str:
     return text + "."
 
 
-def recheck_lines(rows: list[dict]) -> list[str]:
-    """One sentence per task run again at a later commit (results/hopper_recheck.csv), with its seeds."""
+def recheck_lines(rows: list[dict], record: str = "hopper_recheck.csv", how: str = "trained again") -> list[str]:
+    """One sentence per task run again (``how``: at a later commit, or with another setting), with its seeds."""
     lines = []
     for env_id, stat in task_stats(rows).items():
         commits = ", ".join(sorted({row["commit"] for row in rows if row["env"] == env_id}))
         returns = ", ".join(f"{value:.0f}" for value in stat["returns"])
         lines.append(
-            f"{env_id} trained again at commit {commits} (`benchmarks/results/hopper_recheck.csv`, seeds "
+            f"{env_id} {how} at commit {commits} (`benchmarks/results/{record}`, seeds "
             f"{', '.join(map(str, stat['seeds']))}): {returns}, mean {stat['mean']:.1f} ± {stat['std']:.1f}."
         )
     return lines
@@ -279,6 +279,9 @@ def readme_blocks(results) -> dict[str, str]:
     stats = task_stats(records.read_rows(results / "mujoco.csv"))
     table1 = records.read_rows(results / "table1.csv")
     recheck = recheck_lines(records.read_rows(results / "hopper_recheck.csv"))
+    float64 = recheck_lines(
+        records.read_rows(results / "float64_runs.csv"), "float64_runs.csv", "with the networks in float64"
+    )
     table1_1m = records.read_rows(results / "table1_1m.csv")
     full_length = []
     if table1_1m:
@@ -292,6 +295,7 @@ def readme_blocks(results) -> dict[str, str]:
             mujoco_table(stats)
             + (["", *recheck] if recheck else [])
             + current_code_lines(records.read_rows(results / "table1_1m_runs.csv"))
+            + (["", *float64] if float64 else [])
         ),
         "speed": speed_sentence(records.read_rows(results / "speed.csv")),
         "table1": "\n".join(full_length + table1_lines(table1, [])),
