@@ -161,7 +161,7 @@ def table1_lines(table: list[dict], randoms: list[dict]) -> list[str]:
     if not table:
         return ["No Table 1 runs are recorded yet."]
     lines = [
-        f"Reduced scale: {table[0]['scale']}. Score: per task the random policy's mean return is 0 and the best final "
+        f"Scale: {table[0]['scale']}. Score: per task the random policy's mean return is 0 and the best final "
         "return of any setting is 1; a setting's score is the mean over its runs, ± its standard error from seed to "
         "seed (the seeds' variance within each task, pooled over the tasks).",
         "",
