@@ -106,9 +106,14 @@ def mujoco_table(stats: dict[str, dict]) -> list[str]:
     return lines
 
 
-def mujoco_verdict(stats: dict[str, dict]) -> str:
+def complete_and_above(stats: dict[str, dict]) -> tuple[list[str], list[str]]:
+    """The tasks with 3 seeds recorded, and those of them whose mean is at or above the paper's value."""
     complete = [env_id for env_id in TASKS if env_id in stats and len(stats[env_id]["returns"]) >= 3]
-    above = [env_id for env_id in complete if at_or_above(env_id, stats[env_id]["mean"])]
+    return complete, [env_id for env_id in complete if at_or_above(env_id, stats[env_id]["mean"])]
+
+
+def mujoco_verdict(stats: dict[str, dict]) -> str:
+    complete, above = complete_and_above(stats)
     steps = sorted({step for env_id in stats for step in stats[env_id]["steps"]})
     return (
         f"{len(complete)} of 7 tasks have 3 seeds recorded; minippo's mean is at or above the paper's value (the low "
@@ -257,8 +262,7 @@ def current_code_lines(table1_runs: list[dict]) -> list[str]:
     if not rows:
         return []
     stats = task_stats(rows)
-    complete = [env_id for env_id in TASKS if env_id in stats and len(stats[env_id]["returns"]) >= 3]
-    above = [env_id for env_id in complete if at_or_above(env_id, stats[env_id]["mean"])]
+    complete, above = complete_and_above(stats)
     commits = ", ".join(sorted({row["commit"] for row in rows}))
     return [
         "",
@@ -285,7 +289,7 @@ def readme_blocks(results) -> dict[str, str]:
     table1_1m = records.read_rows(results / "table1_1m.csv")
     full_length = []
     if table1_1m:
-        tasks = table1_1m[0]["scale"].split(";")[0].removeprefix("tasks ").split()
+        tasks = table1_1m[0]["task_ids"].split()
         names = ", ".join(tasks[:-1]) + " and " + tasks[-1] if len(tasks) > 1 else tasks[0]
         heading = f"At the paper's 1M steps, on {len(tasks)} of the paper's 7 tasks ({names}):"
         shorter = "The first reduction, on three tasks at 250k steps:"

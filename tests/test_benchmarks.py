@@ -137,6 +137,7 @@ def test_write_table_scores_only_the_tasks_whose_runs_are_all_recorded(tmp_path)
     table = table1.write_table(*args, ["A", "B"], [1, 2], 5000)
     assert {row["setting"]: row["score"] for row in table} == {cpi: round((0.5 + 0.4) / 2, 2), clip: 0.9}
     assert all(row["tasks"] == 1 and row["scale"].startswith("tasks A;") for row in table)
+    assert all(row["task_ids"] == "A" for row in table)
     with pytest.raises(records.BenchmarkError, match="no task has all its runs"):
         table1.write_table(*args, ["B"], [1, 2], 5000)
 
