@@ -277,6 +277,29 @@ def current_code_lines(table1_runs: list[dict]) -> list[str]:
     ]
 
 
+def same_math_lines(rows: list[dict]) -> list[str]:
+    """One sentence per comparison in same_math.csv: how far the current code's short run is from the earlier
+    commit's at update 1, and at which update the two runs part (a difference above 1%)."""
+    groups: dict[tuple, list[dict]] = {}
+    for row in rows:
+        groups.setdefault((row["env"], row["seed"], row["dtype"], row["earlier_commit"]), []).append(row)
+    lines = []
+    for (env_id, seed, dtype, earlier), group in groups.items():
+        group.sort(key=lambda row: int(row["update"]))
+        differences = [float(row["max_relative_difference"]) for row in group]
+        parted = next((row["update"] for row, d in zip(group, differences) if d > 0.01), None)
+        ending = (
+            f"the runs part (above 1%) at update {parted}"
+            if parted
+            else f"they stay within {max(differences):.1g} for all {len(group)} updates"
+        )
+        lines.append(
+            f"{env_id}, seed {seed}, {dtype}, commit {earlier} against {group[0]['commit']} "
+            f"(`{group[0]['command']}`): largest relative difference {differences[0]:.1g} at update 1; {ending}."
+        )
+    return lines
+
+
 def readme_blocks(results) -> dict[str, str]:
     """The README's generated blocks, by name: the seven-task table, the speed paragraph, Table 1."""
     results = Path(results)
@@ -286,6 +309,16 @@ def readme_blocks(results) -> dict[str, str]:
     float64 = recheck_lines(
         records.read_rows(results / "float64_runs.csv"), "float64_runs.csv", "with the networks in float64"
     )
+    same_math = same_math_lines(records.read_rows(results / "same_math.csv"))
+    if same_math:
+        same_math = [
+            "Same training, other rounding: `benchmarks/same_math.py` trains a few updates at an earlier commit and at "
+            "the current one, same task and seed, and compares them update by update "
+            "(`benchmarks/results/same_math.csv`). Agreement to rounding at update 1 means the later code computes "
+            "the same algorithm; after that, rounding differences grow until the two runs are different samples of it.",
+            "",
+            *same_math,
+        ]
     table1_1m = records.read_rows(results / "table1_1m.csv")
     full_length = []
     if table1_1m:
@@ -300,6 +333,7 @@ def readme_blocks(results) -> dict[str, str]:
             + (["", *recheck] if recheck else [])
             + current_code_lines(records.read_rows(results / "table1_1m_runs.csv"))
             + (["", *float64] if float64 else [])
+            + (["", *same_math] if same_math else [])
         ),
         "speed": speed_sentence(records.read_rows(results / "speed.csv")),
         "table1": "\n".join(full_length + table1_lines(table1, [])),

@@ -417,3 +417,42 @@ def test_the_recheck_sentence_gives_each_seed_and_the_commit():
     ]
     (line,) = summary.recheck_lines(rows)
     assert "commit abc1234" in line and "seeds 1, 2): 2300, 2100, mean 2200.0 ± 141.4." in line
+
+
+def test_the_same_math_sentence_says_where_the_runs_part():
+    def row(env_id, update, difference):
+        return {"env": env_id, "seed": "1", "dtype": "float64", "update": str(update), "earlier_commit": "abc1234",
+                "commit": "def5678", "max_relative_difference": str(difference), "command": "python same_math.py"}
+
+    rows = [row("Hopper-v5", 1, 1e-15), row("Hopper-v5", 2, 3e-3), row("Hopper-v5", 3, 0.2), row("Hopper-v5", 4, 0.01)]
+    rows += [row("Swimmer-v5", 2, 2e-11), row("Swimmer-v5", 1, 4e-16)]
+    hopper, swimmer = summary.same_math_lines(rows)
+    assert "commit abc1234 against def5678" in hopper
+    assert "4e-16 at update 1" not in hopper and "1e-15 at update 1; the runs part (above 1%) at update 3." in hopper
+    assert swimmer.endswith("4e-16 at update 1; they stay within 2e-11 for all 2 updates.")
+
+
+def test_same_math_finds_no_difference_between_a_commit_and_itself(tmp_path):
+    """The real script, end to end: HEAD in a worktree against the working tree, two CartPole updates. The same code
+    on the same machine gives the same numbers, so every difference is exactly zero."""
+    import same_math
+
+    if records.git_commit().endswith("+dirty"):
+        pytest.skip("minippo/ has uncommitted edits, so HEAD is not the code that runs")
+    record = tmp_path / "same.csv"
+    assert same_math.main(["HEAD", "--env", "CartPole-v1", "--updates", "2", "--csv", str(record)]) == 0
+    rows = records.read_rows(record)
+    assert [row["update"] for row in rows] == ["1", "2"]
+    assert all(float(row["max_relative_difference"]) == 0.0 for row in rows)
+    assert rows[0]["return_mean_earlier"] == rows[0]["return_mean_current"] != ""
+
+
+def test_same_math_refuses_an_unknown_commit_on_one_line(capsys, tmp_path):
+    import same_math
+
+    with pytest.raises(SystemExit) as stop:
+        same_math.main(["no-such-commit", "--csv", str(tmp_path / "x.csv")])
+    assert stop.value.code != 0
+    error = capsys.readouterr().err.strip()
+    assert error.endswith(": error: no commit named 'no-such-commit' in this repository") and "\n" not in error
+    assert not (tmp_path / "x.csv").exists()

@@ -1,0 +1,151 @@
+"""Does the current minippo compute the same training as an earlier commit? A short run of each, side by side.
+
+The speed work rewrote the rollout and the update (fewer NumPy calls, Python floats in the per-step recurrences,
+one gather per epoch). Those rewrites are meant to change how the numbers are computed, not which numbers. This
+script checks that: it checks out the earlier commit into a temporary git worktree, trains the same task with the
+same seed for a few updates at both commits in float64 (one BLAS thread each, one after the other), and writes each
+update's statistics from both runs and their largest relative difference to a CSV.
+
+Same math means the two agree to rounding (about 1e-15 relative) at the first update. Rounding differences then
+grow, as they do in any training of a chaotic simulator, and after some updates the two runs are different samples
+of the same algorithm; the CSV shows where that happens. A changed algorithm (another loss, another normalisation,
+another random draw) shows as a difference far above rounding at update 1.
+
+    python benchmarks/same_math.py 92bb26d --env InvertedDoublePendulum-v5 --seed 1 --updates 20
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import records  # noqa: E402
+
+CSV_PATH = records.RESULTS / "same_math.csv"
+COLUMNS = ("return_mean", "approx_kl", "entropy", "value_loss", "explained_variance")
+FIELDS = ["env", "seed", "dtype", "update", "earlier_commit", "commit"]
+FIELDS += [f"{column}_{side}" for column in COLUMNS for side in ("earlier", "current")]
+FIELDS += ["max_relative_difference", "command"]
+
+
+def git(*args, cwd=records.ROOT) -> str:
+    result = subprocess.run(["git", *args], cwd=cwd, capture_output=True, text=True)
+    if result.returncode != 0:
+        message = (result.stderr.strip().splitlines() or [f"exit code {result.returncode}"])[-1]
+        raise records.BenchmarkError(f"git {' '.join(args)}: {message}")
+    return result.stdout.strip()
+
+
+def train(code_dir: Path, env_id: str, seed: int, updates: int, dtype: str, out: Path) -> list[dict]:
+    """``python -m minippo train`` run from ``code_dir``, so that the minippo imported is the one in that folder."""
+    env = {**os.environ, **records.THREAD_ENV}
+    probe = "import minippo, minippo.ppo as p; print(minippo.__file__); print('dtype' in p.Config.__dataclass_fields__)"
+    where, has_dtype = subprocess.run(
+        [sys.executable, "-c", probe], cwd=code_dir, env=env, capture_output=True, text=True
+    ).stdout.split()
+    if not Path(where).resolve().is_relative_to(code_dir.resolve()):
+        raise records.BenchmarkError(f"running from {code_dir} imported minippo from {where}, not from that folder")
+    argv = [
+        sys.executable,
+        "-m",
+        "minippo",
+        "train",
+        env_id,
+        "--steps",
+        str(updates * 2048),
+        "--seed",
+        str(seed),
+        "--out",
+        str(out),
+        "--force",
+        "--quiet",
+    ]
+    if has_dtype == "True":
+        argv += ["--config", f"dtype={dtype}"]
+    elif dtype != "float64":  # before the dtype field, minippo computed in float64 only
+        raise records.BenchmarkError(f"the code at {code_dir} has no dtype setting: it computes in float64 only")
+    result = subprocess.run(argv, cwd=code_dir, env=env, capture_output=True, text=True)
+    if result.returncode != 0:
+        raise records.BenchmarkError(f"training at {code_dir} failed: {result.stderr.strip()[-300:]}")
+    return records.read_rows(out / "progress.csv")
+
+
+def relative_difference(a: float, b: float) -> float:
+    scale = max(abs(a), abs(b))
+    return 0.0 if scale == 0.0 else abs(a - b) / scale
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("earlier", help="the earlier commit to compare with (any git revision)")
+    parser.add_argument("--env", default="InvertedDoublePendulum-v5")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--updates", type=int, default=20)
+    parser.add_argument("--dtype", choices=("float64", "float32"), default="float64")
+    parser.add_argument(
+        "--csv",
+        default=str(CSV_PATH),
+        help="the record; rows of an earlier comparison of the same commit, task, seed and dtype are replaced",
+    )
+    args = parser.parse_args(argv)
+    if not 1 <= args.updates <= 500:
+        records.fail(f"--updates must be between 1 and 500, not {args.updates}")
+    command = "python benchmarks/same_math.py " + records.shell_text(sys.argv[1:] if argv is None else argv)
+    try:
+        try:
+            earlier = git("rev-parse", "--short", "--verify", "--quiet", f"{args.earlier}^{{commit}}")
+        except records.BenchmarkError:
+            raise records.BenchmarkError(f"no commit named {args.earlier!r} in this repository") from None
+        current = records.git_commit()
+        with tempfile.TemporaryDirectory(prefix="minippo-same-math-") as scratch:
+            scratch = Path(scratch)
+            worktree = scratch / "earlier"
+            git("worktree", "add", "--detach", str(worktree), earlier)
+            try:
+                rows = {
+                    "earlier": train(worktree, args.env, args.seed, args.updates, args.dtype, scratch / "run-earlier"),
+                    "current": train(
+                        records.ROOT, args.env, args.seed, args.updates, args.dtype, scratch / "run-current"
+                    ),
+                }
+            finally:
+                git("worktree", "remove", "--force", str(worktree))
+    except records.BenchmarkError as error:
+        records.fail(str(error))
+    table = []
+    for before, now in zip(rows["earlier"], rows["current"]):
+        row = {
+            "env": args.env,
+            "seed": args.seed,
+            "dtype": args.dtype,
+            "update": now["update"],
+            "earlier_commit": earlier,
+            "commit": current,
+            "command": command,
+        }
+        differences = []
+        for column in COLUMNS:
+            row[f"{column}_earlier"], row[f"{column}_current"] = before[column], now[column]
+            differences.append(relative_difference(float(before[column]), float(now[column])))
+        row["max_relative_difference"] = f"{max(differences):.3g}"
+        table.append(row)
+    same = ("env", "seed", "dtype", "earlier_commit")
+    kept = [old for old in records.read_rows(args.csv) if any(str(old[k]) != str(table[0][k]) for k in same)]
+    with open(args.csv, "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=FIELDS)
+        writer.writeheader()
+        writer.writerows(kept + table)
+    for row in table:
+        print(f"update {row['update']:>3}: largest relative difference {row['max_relative_difference']}")
+    print(f"{args.env} seed {args.seed}, {args.dtype}: {earlier} against {current} -> {records.relative(args.csv)}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
