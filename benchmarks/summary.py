@@ -324,7 +324,13 @@ def readme_blocks(results) -> dict[str, str]:
     if table1_1m:
         tasks = table1_1m[0]["task_ids"].split()
         names = ", ".join(tasks[:-1]) + " and " + tasks[-1] if len(tasks) > 1 else tasks[0]
-        heading = f"At the paper's 1M steps, on {len(tasks)} of the paper's 7 tasks ({names}):"
+        runs = sum(int(row["runs"]) for row in table1_1m)
+        heading = (
+            f"At the paper's full scale, all 7 of its tasks ({names}), {table1_1m[0]['seeds']} seeds, 1M steps: "
+            f"{runs} runs:"
+            if len(tasks) == 7
+            else f"At the paper's 1M steps, on {len(tasks)} of the paper's 7 tasks ({names}):"
+        )
         shorter = "The first reduction, on three tasks at 250k steps:"
         full_length = [heading, "", *table1_lines(table1_1m, []), "", shorter, ""]
     return {
