@@ -415,7 +415,7 @@ def plot_mujoco(rows: list[dict], runs_root, out) -> Path | None:
     return Path(out)
 
 
-def plot_table1(table: list[dict], out) -> Path | None:
+def plot_table1(table: list[dict], out, label: str = "minippo (reduced scale)") -> Path | None:
     if not table:
         return None
     import matplotlib
@@ -429,7 +429,7 @@ def plot_table1(table: list[dict], out) -> Path | None:
     names = [row["setting"] for row in table]
     y = np.arange(len(names))
     fig, ax = plt.subplots(figsize=(7.5, 4.5), dpi=100)
-    ax.barh(y - 0.2, [float(row["score"]) for row in table], 0.4, color=ORANGE, label="minippo (reduced scale)")
+    ax.barh(y - 0.2, [float(row["score"]) for row in table], 0.4, color=ORANGE, label=label)
     ax.barh(y + 0.2, [float(row["paper_score"]) for row in table], 0.4, color=INK, alpha=0.6, label="paper, Table 1")
     ax.set_yticks(y, names, fontsize=8)
     ax.invert_yaxis()
@@ -471,6 +471,10 @@ def build(results, runs_root) -> tuple[str, list[str]]:
         parts += [f"Records made at commit(s) {', '.join(commits)}; each row of mujoco.csv holds its command.", ""]
     if mujoco_rows:
         parts += ["![Learning curves: mean over seeds, band from min to max](mujoco_curves.png)", ""]
+    table1_1m = records.read_rows(results / "table1_1m.csv")
+    if table1_1m:
+        parts += ["## Table 1: surrogate objectives, 1M steps a run", "", *table1_lines(table1_1m, randoms), ""]
+        parts += ["![Table 1 at 1M steps: minippo's scores beside the paper's](table1_1m.png)", ""]
     parts += ["## Table 1: surrogate objectives, reduced scale", "", *table1_lines(table1, randoms), ""]
     if table1:
         parts += ["![Table 1: minippo's scores beside the paper's](table1.png)", ""]
@@ -503,6 +507,7 @@ def main(argv=None) -> int:
     (results / "summary.md").write_text(text)
     plot_mujoco(records.read_rows(results / "mujoco.csv"), args.runs, results / "mujoco_curves.png")
     plot_table1(records.read_rows(results / "table1.csv"), results / "table1.png")
+    plot_table1(records.read_rows(results / "table1_1m.csv"), results / "table1_1m.png", "minippo (1M steps a run)")
     print(f"wrote {records.relative(results / 'summary.md')} and its figures")
     return 0
 
