@@ -22,6 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import records  # noqa: E402
 from seven_tasks import TASKS  # noqa: E402
 from table1 import SETTINGS as TABLE1_SETTINGS  # noqa: E402
+from table1 import normalized_scores  # noqa: E402
 
 TABLE1_ROWS = len(TABLE1_SETTINGS)
 
@@ -255,6 +256,54 @@ def recheck_lines(rows: list[dict], record: str = "hopper_recheck.csv", how: str
     return lines
 
 
+def table1_by_task(table: list[dict], runs: list[dict], randoms: list[dict]) -> dict[str, dict[str, float]]:
+    """{setting: {task: mean normalised return}} for the runs a Table 1 table scored (its tasks, seeds and steps),
+    by the table's own scoring, in the table's row order."""
+    if not table:
+        return {}
+    tasks, steps = table[0]["task_ids"].split(), table[0]["steps"]
+    random_return = {row["env"]: float(row["return_mean"]) for row in randoms if row["episodes"] == "100" and
+                     row["seed"] == "0"}
+    scored = [run for run in runs if run["env"] in tasks and run["steps"] == steps]
+    scores = normalized_scores(scored, random_return)
+    return {row["setting"]: scores[row["setting"]]["per_task"] for row in table if row["setting"] in scores}
+
+
+def table1_task_lines(by_task: dict[str, dict[str, float]]) -> list[str]:
+    """Table 1's scores task by task (a Markdown table), and how the best setting fares against ε = 0.2 on each."""
+    if not by_task:
+        return []
+    tasks = list(next(iter(by_task.values())))
+    lines = [
+        "| Setting | " + " | ".join(task.removesuffix("-v5") for task in tasks) + " |",
+        "|---|" + "---:|" * len(tasks),
+    ]
+    for setting, per_task in by_task.items():
+        lines.append(f"| {setting} | " + " | ".join(f"{per_task[task]:.2f}" for task in tasks) + " |")
+    leader = leader_sentence(by_task)
+    return lines + (["", leader] if leader else [])
+
+
+def leader_sentence(by_task: dict[str, dict[str, float]]) -> str | None:
+    """When the best setting is not the paper's ε = 0.2: how the two compare task by task (None otherwise)."""
+    means = {setting: sum(per_task.values()) / len(per_task) for setting, per_task in by_task.items()}
+    clip = "Clipping, ε = 0.2"
+    best = max(means, key=means.get) if means else clip
+    return versus_sentence(by_task, best, clip) if best != clip and clip in by_task else None
+
+
+def versus_sentence(by_task: dict[str, dict[str, float]], first: str, second: str) -> str:
+    """Where ``first`` scores higher than ``second``, the same to two decimals, and lower, task by task."""
+    groups = {"higher": [], "the same to two decimals": [], "lower": []}
+    for task in by_task[first]:
+        a, b = round(by_task[first][task], 2), round(by_task[second][task], 2)
+        groups["higher" if a > b else "lower" if a < b else "the same to two decimals"].append(task)
+    parts = [
+        f"{how} on {len(tasks)}" + (f" ({', '.join(tasks)})" if tasks else "") for how, tasks in groups.items()
+    ]
+    return f"Task by task, against {second}, {first} scores " + ", ".join(parts[:-1]) + f" and {parts[-1]}."
+
+
 def current_code_lines(table1_runs: list[dict]) -> list[str]:
     """The seven-task table again from Table 1's 1M-step "Clipping, ε = 0.2" runs: the paper's defaults, the same
     command as the seven-task runs, made at later commits."""
@@ -332,7 +381,13 @@ def readme_blocks(results) -> dict[str, str]:
             else f"At the paper's 1M steps, on {len(tasks)} of the paper's 7 tasks ({names}):"
         )
         shorter = "The first reduction, on three tasks at 250k steps:"
-        full_length = [heading, "", *table1_lines(table1_1m, []), "", shorter, ""]
+        by_task = table1_by_task(
+            table1_1m, records.read_rows(results / "table1_1m_runs.csv"), records.read_rows(results / "random.csv")
+        )
+        leader = leader_sentence(by_task)
+        note = " Every setting's score task by task is in `benchmarks/results/summary.md`."
+        full_length = [heading, "", *table1_lines(table1_1m, []), *(["", leader + note] if leader else [])]
+        full_length += ["", shorter, ""]
     return {
         "mujoco": "\n".join(
             mujoco_table(stats)
@@ -474,6 +529,9 @@ def build(results, runs_root) -> tuple[str, list[str]]:
     table1_1m = records.read_rows(results / "table1_1m.csv")
     if table1_1m:
         parts += ["## Table 1: surrogate objectives, 1M steps a run", "", *table1_lines(table1_1m, randoms), ""]
+        by_task = table1_by_task(table1_1m, records.read_rows(results / "table1_1m_runs.csv"), randoms)
+        parts += ["Each setting's score task by task (the mean of its seeds' normalised returns):", ""]
+        parts += [*table1_task_lines(by_task), ""]
         parts += ["![Table 1 at 1M steps: minippo's scores beside the paper's](table1_1m.png)", ""]
     parts += ["## Table 1: surrogate objectives, reduced scale", "", *table1_lines(table1, randoms), ""]
     if table1:

@@ -68,7 +68,8 @@ def slug(setting: str) -> str:
 def normalized_scores(runs: list[dict], random_return: dict[str, float]) -> dict[str, dict]:
     """Table 1's scoring. ``runs``: dicts with setting, env, return_mean. Per task, the random policy's return maps
     to 0 and the best run's return (over every setting and seed on that task) to 1; each setting's score is the
-    mean of its runs' normalised returns. Returns {setting: {"score", "se", "runs", "tasks"}}.
+    mean of its runs' normalised returns. Returns {setting: {"score", "se", "runs", "tasks", "per_task"}}, where
+    ``per_task`` maps each task to the mean of the setting's normalised returns on it.
 
     ``se`` is the standard error of the score from seed to seed: each task's sample variance over its seeds, pooled
     as for a mean over tasks, √(Σ_k s_k²/n_k) / K for K tasks with n_k seeds each (None when a task has one seed)."""
@@ -91,7 +92,13 @@ def normalized_scores(runs: list[dict], random_return: dict[str, float]) -> dict
         if all(len(task) > 1 for task in tasks.values()):
             pooled = sum(statistics.variance(task) / len(task) for task in tasks.values())
             se = math.sqrt(pooled) / len(tasks)
-        scores[setting] = {"score": sum(values) / len(values), "se": se, "runs": len(values), "tasks": len(tasks)}
+        scores[setting] = {
+            "score": sum(values) / len(values),
+            "se": se,
+            "runs": len(values),
+            "tasks": len(tasks),
+            "per_task": {env_id: sum(task) / len(task) for env_id, task in tasks.items()},
+        }
     return scores
 
 

@@ -456,3 +456,36 @@ def test_same_math_refuses_an_unknown_commit_on_one_line(capsys, tmp_path):
     error = capsys.readouterr().err.strip()
     assert error.endswith(": error: no commit named 'no-such-commit' in this repository") and "\n" not in error
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_table1_by_task_scores_each_task_as_the_table_does():
+    def run(setting, env_id, seed, value, steps="4096"):
+        return {"setting": setting, "env": env_id, "seed": str(seed), "steps": steps, "return_mean": str(value)}
+
+    runs = [
+        run("Clipping, ε = 0.2", "A", 1, 50), run("Clipping, ε = 0.2", "A", 2, 30),
+        run("Fixed KL, β = 3", "A", 1, 110), run("Fixed KL, β = 3", "A", 2, 90),
+        run("Clipping, ε = 0.2", "B", 1, 10), run("Fixed KL, β = 3", "B", 1, 10),
+        run("Fixed KL, β = 3", "C", 1, 999),  # not among the table's tasks
+        run("Fixed KL, β = 3", "A", 3, 999, steps="2048"),  # another scale
+    ]
+    randoms = [{"env": env_id, "return_mean": value, "episodes": "100", "seed": "0"}
+               for env_id, value in (("A", "10"), ("B", "0"), ("C", "10"))]
+    table = [{"setting": "Clipping, ε = 0.2", "task_ids": "A B", "steps": "4096"},
+             {"setting": "Fixed KL, β = 3", "task_ids": "A B", "steps": "4096"}]
+    by_task = summary.table1_by_task(table, runs, randoms)
+    # task A: random 10, best 110, so (50-10)/100 and (30-10)/100 average 0.3; task B: random 0, best 10
+    assert by_task["Clipping, ε = 0.2"] == pytest.approx({"A": 0.3, "B": 1.0})
+    assert by_task["Fixed KL, β = 3"] == pytest.approx({"A": 0.9, "B": 1.0})
+    lines = summary.table1_task_lines(by_task)
+    assert lines[0] == "| Setting | A | B |" and lines[2] == "| Clipping, ε = 0.2 | 0.30 | 1.00 |"
+    assert lines[-1] == (
+        "Task by task, against Clipping, ε = 0.2, Fixed KL, β = 3 scores higher on 1 (A), "
+        "the same to two decimals on 1 (B) and lower on 0."
+    )
+
+
+def test_no_task_by_task_sentence_when_the_paper_setting_leads():
+    by_task = {"Clipping, ε = 0.2": {"A": 0.9}, "Fixed KL, β = 3": {"A": 0.5}}
+    assert summary.leader_sentence(by_task) is None
+    assert summary.table1_task_lines(by_task)[-1] == "| Fixed KL, β = 3 | 0.50 |"
