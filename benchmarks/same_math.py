@@ -51,21 +51,7 @@ def train(code_dir: Path, env_id: str, seed: int, updates: int, dtype: str, out:
     ).stdout.split()
     if not Path(where).resolve().is_relative_to(code_dir.resolve()):
         raise records.BenchmarkError(f"running from {code_dir} imported minippo from {where}, not from that folder")
-    argv = [
-        sys.executable,
-        "-m",
-        "minippo",
-        "train",
-        env_id,
-        "--steps",
-        str(updates * 2048),
-        "--seed",
-        str(seed),
-        "--out",
-        str(out),
-        "--force",
-        "--quiet",
-    ]
+    argv = [sys.executable, "-m", *records.train_command(env_id, updates * 2048, seed, out, ["--force"])]
     if has_dtype == "True":
         argv += ["--config", f"dtype={dtype}"]
     elif dtype != "float64":  # before the dtype field, minippo computed in float64 only
@@ -108,18 +94,14 @@ def main(argv=None) -> int:
             worktree = scratch / "earlier"
             git("worktree", "add", "--detach", str(worktree), earlier)
             try:
-                rows = {
-                    "earlier": train(worktree, args.env, args.seed, args.updates, args.dtype, scratch / "run-earlier"),
-                    "current": train(
-                        records.ROOT, args.env, args.seed, args.updates, args.dtype, scratch / "run-current"
-                    ),
-                }
+                earlier_rows = train(worktree, args.env, args.seed, args.updates, args.dtype, scratch / "earlier-run")
+                current_rows = train(records.ROOT, args.env, args.seed, args.updates, args.dtype, scratch / "run")
             finally:
                 git("worktree", "remove", "--force", str(worktree))
     except records.BenchmarkError as error:
         records.fail(str(error))
     table = []
-    for before, now in zip(rows["earlier"], rows["current"]):
+    for before, now in zip(earlier_rows, current_rows):
         row = {
             "env": args.env,
             "seed": args.seed,

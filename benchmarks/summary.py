@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import records  # noqa: E402
 from seven_tasks import TASKS  # noqa: E402
 from table1 import SETTINGS as TABLE1_SETTINGS  # noqa: E402
-from table1 import normalized_scores  # noqa: E402
+from table1 import normalized_scores, random_returns  # noqa: E402
 
 TABLE1_ROWS = len(TABLE1_SETTINGS)
 
@@ -262,10 +262,8 @@ def table1_by_task(table: list[dict], runs: list[dict], randoms: list[dict]) -> 
     if not table:
         return {}
     tasks, steps = table[0]["task_ids"].split(), table[0]["steps"]
-    random_return = {row["env"]: float(row["return_mean"]) for row in randoms if row["episodes"] == "100" and
-                     row["seed"] == "0"}
     scored = [run for run in runs if run["env"] in tasks and run["steps"] == steps]
-    scores = normalized_scores(scored, random_return)
+    scores = normalized_scores(scored, random_returns(randoms))
     return {row["setting"]: scores[row["setting"]]["per_task"] for row in table if row["setting"] in scores}
 
 
@@ -286,10 +284,11 @@ def table1_task_lines(by_task: dict[str, dict[str, float]]) -> list[str]:
 
 def leader_sentence(by_task: dict[str, dict[str, float]]) -> str | None:
     """When the best setting is not the paper's ε = 0.2: how the two compare task by task (None otherwise)."""
-    means = {setting: sum(per_task.values()) / len(per_task) for setting, per_task in by_task.items()}
     clip = "Clipping, ε = 0.2"
-    best = max(means, key=means.get) if means else clip
-    return versus_sentence(by_task, best, clip) if best != clip and clip in by_task else None
+    if clip not in by_task:
+        return None
+    best = max(by_task, key=lambda setting: sum(by_task[setting].values()) / len(by_task[setting]))
+    return None if best == clip else versus_sentence(by_task, best, clip)
 
 
 def versus_sentence(by_task: dict[str, dict[str, float]], first: str, second: str) -> str:

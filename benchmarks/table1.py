@@ -120,14 +120,19 @@ def complete_tasks(runs: list[dict], tasks, seeds) -> list[str]:
     return [env_id for env_id in tasks if all((s, env_id, seed) in done for s in settings for seed in seeds)]
 
 
+def random_returns(rows: list[dict]) -> dict[str, float]:
+    """{task: the random policy's mean return} from random.csv rows: the baselines Table 1 is scored with."""
+    return {
+        row["env"]: float(row["return_mean"])
+        for row in rows
+        if row["episodes"] == str(RANDOM_EPISODES) and row["seed"] == str(RANDOM_SEED)
+    }
+
+
 def write_table(runs_csv, random_csv, table_csv, tasks, seeds, steps) -> list[dict]:
     """Score the recorded runs of ``tasks`` × ``seeds`` and (re)write table1.csv, in the paper's row order. Only
     the tasks whose runs are all recorded count, and the table's ``scale`` names them."""
-    randoms = {
-        row["env"]: float(row["return_mean"])
-        for row in records.read_rows(random_csv)
-        if row["episodes"] == str(RANDOM_EPISODES) and row["seed"] == str(RANDOM_SEED)
-    }
+    randoms = random_returns(records.read_rows(random_csv))
     runs = [
         row
         for row in records.read_rows(runs_csv)
