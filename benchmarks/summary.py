@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import records  # noqa: E402
 from seven_tasks import TASKS  # noqa: E402
 from table1 import SETTINGS as TABLE1_SETTINGS  # noqa: E402
-from table1 import normalized_scores, random_returns  # noqa: E402
+from table1 import complete_tasks, normalized_scores, random_returns  # noqa: E402
 
 TABLE1_ROWS = len(TABLE1_SETTINGS)
 
@@ -303,6 +303,94 @@ def versus_sentence(by_task: dict[str, dict[str, float]], first: str, second: st
     return f"Task by task, against {second}, {first} scores " + ", ".join(parts[:-1]) + f" and {parts[-1]}."
 
 
+OTHER_TAG = " (as the paper describes it)"
+
+
+def implementation_scores(default_runs: list[dict], other_runs: list[dict], randoms: list[dict]) -> dict:
+    """Table 1's settings that ran both with minippo's defaults and with other ``--config`` overrides, on one scale.
+
+    Only the tasks on which the other record has every one of its settings at each of the defaults' seeds are
+    scored. Per task the
+    random policy is 0 and the best run of either record (all of the defaults' settings included) is 1, so while no
+    run of the other record beats the defaults' best, the default column equals the full table's scores.
+    Returns {setting: (default scores, other scores)}, each as ``normalized_scores`` gives them, in the order of
+    Table 1; {} while no task is complete."""
+    if not other_runs:
+        return {}
+    seeds = sorted({int(run["seed"]) for run in default_runs})  # a task counts once it has the defaults' seeds
+    steps = {run["steps"] for run in other_runs}
+    tasks = complete_tasks(other_runs, [task for task in TASKS if any(r["env"] == task for r in other_runs)], seeds)
+    if not tasks:
+        return {}
+    pool = [run for run in default_runs if run["env"] in tasks and run["steps"] in steps]
+    pool += [{**run, "setting": run["setting"] + OTHER_TAG} for run in other_runs if run["env"] in tasks]
+    scores = normalized_scores(pool, random_returns(randoms))
+    order = [name for name, _, _ in TABLE1_SETTINGS]
+    return {
+        setting: (scores[setting], scores[setting + OTHER_TAG])
+        for setting in order
+        if setting in scores and setting + OTHER_TAG in scores
+    }
+
+
+def implementation_lines(compared: dict) -> list[str]:
+    """The comparison as a Markdown table, and where ε = 0.2 ranks among the compared settings in each column."""
+    if not compared:
+        return []
+
+    def text(score):
+        return f"{score['score']:.2f}" + (f" ± {score['se']:.2f}" if score["se"] is not None else "")
+
+    paper = {name: value for name, _, value in TABLE1_SETTINGS}
+    first = next(iter(compared.values()))[1]
+    lines = [
+        f"{len(compared)} of Table 1's settings, {first['tasks']} tasks, {first['runs']} runs each way. Score: per "
+        "task the random policy 0 and the best run of either record 1.",
+        "",
+        "| Setting | minippo's defaults | as the paper describes it | paper (Table 1) |",
+        "|---|---:|---:|---:|",
+    ]
+    for setting, (ours, other) in compared.items():
+        lines.append(f"| {setting} | {text(ours)} | {text(other)} | {paper[setting]:.2f} |")
+    clip = "Clipping, ε = 0.2"
+    if clip in compared and len(compared) > 1:
+        ranks = []
+        for column, label in ((0, "with minippo's defaults"), (1, "as the paper describes it")):
+            ranked = sorted(compared, key=lambda setting: -compared[setting][column]["score"])
+            leader = "" if ranked[0] == clip else f", behind {ranked[0]}"
+            ranks.append(f"{ranked.index(clip) + 1} of {len(compared)} {label}{leader}")
+        lines += ["", f"Among these settings {clip} ranks " + "; ".join(ranks) + "."]
+    return lines
+
+
+def common_overrides(rows: list[dict]) -> list[str]:
+    """The ``--config`` KEY=VALUE pairs that every row's command carries (a setting's own pairs differ by row)."""
+    def pairs(command):
+        words = command.split("&&")[-1].split()
+        return words[words.index("--config") + 1:] if "--config" in words else []
+
+    shared = [pair for pair in pairs(rows[0]["command"]) if "=" in pair] if rows else []
+    return [pair for pair in shared if all(pair in pairs(row["command"]) for row in rows)]
+
+
+def implementation_block(results, randoms: list[dict]) -> list[str]:
+    """Table 1's contenders rerun as the paper describes its implementation: a heading that names the overrides, as
+    read from the record's commands, and the comparison ([] while no task is complete)."""
+    other = records.read_rows(results / "table1_1m_paperimpl_runs.csv")
+    compared = implementation_scores(records.read_rows(results / "table1_1m_runs.csv"), other, randoms)
+    if not compared:
+        return []
+    return [
+        "Some of these settings again, as the paper describes them: `--config "
+        + " ".join(common_overrides(other))
+        + "` (no gradient-norm clip, no value clip, no reward scaling: three details that minippo's defaults "
+        "include and the paper does not describe), the same tasks, seeds and steps "
+        "(`benchmarks/results/table1_1m_paperimpl_runs.csv`):",
+        "",
+        *implementation_lines(compared),
+    ]
+
+
 def current_code_lines(table1_runs: list[dict]) -> list[str]:
     """The seven-task table again from Table 1's 1M-step "Clipping, ε = 0.2" runs: the paper's defaults, the same
     command as the seven-task runs, made at later commits."""
@@ -386,6 +474,8 @@ def readme_blocks(results) -> dict[str, str]:
         leader = leader_sentence(by_task)
         note = " Every setting's score task by task is in `benchmarks/results/summary.md`."
         full_length = [heading, "", *table1_lines(table1_1m, []), *(["", leader + note] if leader else [])]
+        described = implementation_block(results, records.read_rows(results / "random.csv"))
+        full_length += ["", *described] if described else []
         full_length += ["", shorter, ""]
     return {
         "mujoco": "\n".join(
@@ -532,6 +622,8 @@ def build(results, runs_root) -> tuple[str, list[str]]:
         parts += ["Each setting's score task by task (the mean of its seeds' normalised returns):", ""]
         parts += [*table1_task_lines(by_task), ""]
         parts += ["![Table 1 at 1M steps: minippo's scores beside the paper's](table1_1m.png)", ""]
+        described = implementation_block(results, randoms)
+        parts += [*described, ""] if described else []
     parts += ["## Table 1: surrogate objectives, reduced scale", "", *table1_lines(table1, randoms), ""]
     if table1:
         parts += ["![Table 1: minippo's scores beside the paper's](table1.png)", ""]

@@ -489,3 +489,38 @@ def test_no_task_by_task_sentence_when_the_paper_setting_leads():
     by_task = {"Clipping, ε = 0.2": {"A": 0.9}, "Fixed KL, β = 3": {"A": 0.5}}
     assert summary.leader_sentence(by_task) is None
     assert summary.table1_task_lines(by_task)[-1] == "| Fixed KL, β = 3 | 0.50 |"
+
+
+def test_two_implementations_are_scored_on_one_scale_over_complete_tasks():
+    def run(setting, env_id, seed, value):
+        return {"setting": setting, "env": env_id, "seed": str(seed), "steps": "4096", "return_mean": str(value)}
+
+    clip, beta, cpi = "Clipping, ε = 0.2", "Fixed KL, β = 3", "No clipping or penalty"
+    default = [
+        run(clip, "Hopper-v5", 1, 60), run(clip, "Hopper-v5", 2, 40),
+        run(beta, "Hopper-v5", 1, 90), run(beta, "Hopper-v5", 2, 70),
+        run(cpi, "Hopper-v5", 1, 110), run(cpi, "Hopper-v5", 2, 10),  # not run the other way, but sets the best
+        run(clip, "Swimmer-v5", 1, 50), run(beta, "Swimmer-v5", 1, 50),
+    ]
+    other = [
+        run(clip, "Hopper-v5", 1, 80), run(clip, "Hopper-v5", 2, 60),
+        run(beta, "Hopper-v5", 1, 30), run(beta, "Hopper-v5", 2, 10),
+        run(clip, "Swimmer-v5", 1, 99),  # Swimmer lacks β = 3 here: not scored, not even in the best
+    ]
+    randoms = [{"env": env_id, "return_mean": "10", "episodes": "100", "seed": "0"}
+               for env_id in ("Hopper-v5", "Swimmer-v5")]
+    compared = summary.implementation_scores(default, other, randoms)
+    assert list(compared) == [clip, beta]  # Table 1's order, only the settings run both ways
+    # Hopper: random 10, best 110 (the defaults' unclipped seed 1), so a return r scores (r - 10) / 100
+    assert compared[clip][0]["score"] == pytest.approx(0.4) and compared[clip][1]["score"] == pytest.approx(0.6)
+    assert compared[beta][0]["score"] == pytest.approx(0.7) and compared[beta][1]["score"] == pytest.approx(0.1)
+    assert compared[clip][1]["tasks"] == 1 and compared[clip][1]["runs"] == 2
+    lines = summary.implementation_lines(compared)
+    assert lines[4] == "| Clipping, ε = 0.2 | 0.40 ± 0.10 | 0.60 ± 0.10 | 0.82 |"
+    assert lines[-1] == (
+        "Among these settings Clipping, ε = 0.2 ranks 2 of 2 with minippo's defaults, behind Fixed KL, β = 3; "
+        "1 of 2 as the paper describes it."
+    )
+    assert summary.implementation_scores(default, [], randoms) == {}
+    assert summary.implementation_scores(default, other[:1], randoms) == {}  # Hopper lacks the defaults' seed 2
+    assert list(summary.implementation_scores(default, other[:2], randoms)) == [clip]  # one setting, all seeds
