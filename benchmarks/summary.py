@@ -360,6 +360,8 @@ def implementation_lines(compared: dict) -> list[str]:
             leader = "" if ranked[0] == clip else f", behind {ranked[0]}"
             ranks.append(f"{ranked.index(clip) + 1} of {len(compared)} {label}{leader}")
         lines += ["", f"Among these settings {clip} ranks " + "; ".join(ranks) + "."]
+        leader = leader_sentence({setting: other["per_task"] for setting, (_, other) in compared.items()})
+        lines += ["", f"As the paper describes it: {leader[0].lower()}{leader[1:]}"] if leader else []
     return lines
 
 

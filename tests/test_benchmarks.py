@@ -520,6 +520,11 @@ def test_two_implementations_are_scored_on_one_scale_over_complete_tasks():
     assert lines[-1] == (
         "Among these settings Clipping, ε = 0.2 ranks 2 of 2 with minippo's defaults, behind Fixed KL, β = 3; "
         "1 of 2 as the paper describes it."
+    )  # ε = 0.2 leads as the paper describes it, so no task-by-task sentence follows
+    behind = {**compared, beta: (compared[beta][0], {**compared[beta][1], "per_task": {"Hopper-v5": 0.9}})}
+    assert summary.implementation_lines(behind)[-1] == (
+        "As the paper describes it: task by task, against Clipping, ε = 0.2, Fixed KL, β = 3 scores higher on 1 "
+        "(Hopper-v5), the same to two decimals on 0 and lower on 0."
     )
     assert summary.implementation_scores(default, [], randoms) == {}
     assert summary.implementation_scores(default, other[:1], randoms) == {}  # Hopper lacks the defaults' seed 2
