@@ -393,6 +393,34 @@ def implementation_block(results, randoms: list[dict]) -> list[str]:
     ]
 
 
+DETAILS = ["grad_norm_clipping", "clip_value_loss", "scale_rewards"]
+
+
+def one_detail_lines(results) -> list[str]:
+    """The unclipped objective with all three details on (the 1M table), with each one off alone
+    (``cpi_without_<detail>_runs.csv``) and with all three off (the paper's description): mean return over seeds."""
+    results = Path(results)
+    none = "No clipping or penalty"
+    columns = {"all on": records.read_rows(results / "table1_1m_runs.csv")}
+    for detail in DETAILS:
+        columns[f"{detail} off"] = records.read_rows(results / f"cpi_without_{detail}_runs.csv")
+    columns["all off"] = records.read_rows(results / "table1_1m_paperimpl_runs.csv")
+    tasks = sorted({row["env"] for detail in DETAILS for row in columns[f"{detail} off"]})
+    if not tasks:
+        return []
+    lines = [
+        "| Task | " + " | ".join(columns) + " |",
+        "|---|" + "---:|" * len(columns),
+    ]
+    for task in tasks:
+        cells = []
+        for rows in columns.values():
+            values = [float(row["return_mean"]) for row in rows if row["setting"] == none and row["env"] == task]
+            cells.append(f"{statistics.mean(values):.0f} ({len(values)})" if values else "—")
+        lines.append(f"| {task} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def current_code_lines(table1_runs: list[dict]) -> list[str]:
     """The seven-task table again from Table 1's 1M-step "Clipping, ε = 0.2" runs: the paper's defaults, the same
     command as the seven-task runs, made at later commits."""
@@ -626,6 +654,15 @@ def build(results, runs_root) -> tuple[str, list[str]]:
         parts += ["![Table 1 at 1M steps: minippo's scores beside the paper's](table1_1m.png)", ""]
         described = implementation_block(results, randoms)
         parts += [*described, ""] if described else []
+        details = one_detail_lines(results)
+        parts += [
+            "No clipping or penalty, 1M steps, with one of the three details off at a time "
+            "(`cpi_without_<detail>_runs.csv`): mean return of the last 100 episodes over the seeds (seeds in "
+            "brackets).",
+            "",
+            *details,
+            "",
+        ] if details else []
     parts += ["## Table 1: surrogate objectives, reduced scale", "", *table1_lines(table1, randoms), ""]
     if table1:
         parts += ["![Table 1: minippo's scores beside the paper's](table1.png)", ""]

@@ -529,3 +529,19 @@ def test_two_implementations_are_scored_on_one_scale_over_complete_tasks():
     assert summary.implementation_scores(default, [], randoms) == {}
     assert summary.implementation_scores(default, other[:1], randoms) == {}  # Hopper lacks the defaults' seed 2
     assert list(summary.implementation_scores(default, other[:2], randoms)) == [clip]  # one setting, all seeds
+
+
+def test_one_detail_table_puts_each_detail_between_all_on_and_all_off(tmp_path):
+    def run(env_id, seed, value):
+        return {"setting": "No clipping or penalty", "env": env_id, "seed": str(seed), "steps": "4096",
+                "return_mean": str(value)}
+
+    assert summary.one_detail_lines(tmp_path) == []  # nothing recorded yet
+    write_csv(tmp_path / "table1_1m_runs.csv", [run("IP", 1, 100), run("IP", 2, 200), run("Other", 1, 5)])
+    write_csv(tmp_path / "cpi_without_clip_value_loss_runs.csv", [run("IP", 1, 1000), run("IP", 2, 900)])
+    write_csv(tmp_path / "table1_1m_paperimpl_runs.csv", [run("IP", 1, 1000)])
+    lines = summary.one_detail_lines(tmp_path)
+    assert lines[0] == (
+        "| Task | all on | grad_norm_clipping off | clip_value_loss off | scale_rewards off | all off |"
+    )
+    assert lines[2:] == ["| IP | 150 (2) | — | 950 (2) | — | 1000 (1) |"]  # only the tasks run one detail at a time
