@@ -25,6 +25,7 @@ from table1 import SETTINGS as TABLE1_SETTINGS  # noqa: E402
 from table1 import complete_tasks, normalized_scores, random_returns  # noqa: E402
 
 TABLE1_ROWS = len(TABLE1_SETTINGS)
+TABLE1_PAPER = {name: score for name, _, score in TABLE1_SETTINGS}  # the paper's Table 1 score of each setting
 
 # Figure 3 of Schulman et al. (2017), PPO (clip) at 1M steps, as read off the plot by third parties (approximate);
 # (low, high) of the read-off range. "At or above the paper" compares a mean with the low end.
@@ -128,9 +129,10 @@ def mujoco_verdict(stats: dict[str, dict]) -> str:
 
 
 def score_text(row: dict) -> str:
-    """A Table 1 score with its seed-to-seed standard error when the record has one: '0.62 ± 0.11'."""
-    se = row.get("score_se") or ""
-    return f"{float(row['score']):.2f}" + (f" ± {float(se):.2f}" if se else "")
+    """A Table 1 score with its seed-to-seed standard error when the record has one: '0.62 ± 0.11'. Takes a row of a
+    table CSV (strings, "" for no error) or scores as ``normalized_scores`` gives them (floats, None for no error)."""
+    se = row.get("score_se")
+    return f"{float(row['score']):.2f}" + (f" ± {float(se):.2f}" if se not in (None, "") else "")
 
 
 def table1_verdict(table: list[dict]) -> str:
@@ -310,25 +312,24 @@ def implementation_scores(default_runs: list[dict], other_runs: list[dict], rand
     """Table 1's settings that ran both with minippo's defaults and with other ``--config`` overrides, on one scale.
 
     Only the tasks on which the other record has every one of its settings at each of the defaults' seeds are
-    scored. Per task the
-    random policy is 0 and the best run of either record (all of the defaults' settings included) is 1, so while no
-    run of the other record beats the defaults' best, the default column equals the full table's scores.
+    scored. Per task the random policy is 0 and the best run of either record (all of the defaults' settings
+    included) is 1, so while no run of the other record beats the defaults' best, the default column equals the full
+    table's scores.
     Returns {setting: (default scores, other scores)}, each as ``normalized_scores`` gives them, in the order of
     Table 1; {} while no task is complete."""
     if not other_runs:
         return {}
     seeds = sorted({int(run["seed"]) for run in default_runs})  # a task counts once it has the defaults' seeds
     steps = {run["steps"] for run in other_runs}
-    tasks = complete_tasks(other_runs, [task for task in TASKS if any(r["env"] == task for r in other_runs)], seeds)
+    tasks = complete_tasks(other_runs, TASKS, seeds)
     if not tasks:
         return {}
     pool = [run for run in default_runs if run["env"] in tasks and run["steps"] in steps]
     pool += [{**run, "setting": run["setting"] + OTHER_TAG} for run in other_runs if run["env"] in tasks]
     scores = normalized_scores(pool, random_returns(randoms))
-    order = [name for name, _, _ in TABLE1_SETTINGS]
     return {
         setting: (scores[setting], scores[setting + OTHER_TAG])
-        for setting in order
+        for setting in TABLE1_PAPER
         if setting in scores and setting + OTHER_TAG in scores
     }
 
@@ -339,9 +340,8 @@ def implementation_lines(compared: dict) -> list[str]:
         return []
 
     def text(score):
-        return f"{score['score']:.2f}" + (f" ± {score['se']:.2f}" if score["se"] is not None else "")
+        return score_text({"score": score["score"], "score_se": score["se"]})
 
-    paper = {name: value for name, _, value in TABLE1_SETTINGS}
     first = next(iter(compared.values()))[1]
     lines = [
         f"{len(compared)} of Table 1's settings, {first['tasks']} tasks, {first['runs']} runs each way. Score: per "
@@ -351,7 +351,7 @@ def implementation_lines(compared: dict) -> list[str]:
         "|---|---:|---:|---:|",
     ]
     for setting, (ours, other) in compared.items():
-        lines.append(f"| {setting} | {text(ours)} | {text(other)} | {paper[setting]:.2f} |")
+        lines.append(f"| {setting} | {text(ours)} | {text(other)} | {TABLE1_PAPER[setting]:.2f} |")
     clip = "Clipping, ε = 0.2"
     if clip in compared and len(compared) > 1:
         ranks = []
@@ -375,11 +375,11 @@ def common_overrides(rows: list[dict]) -> list[str]:
     return [pair for pair in shared if all(pair in pairs(row["command"]) for row in rows)]
 
 
-def implementation_block(results, randoms: list[dict]) -> list[str]:
+def implementation_block(results, default_runs: list[dict], randoms: list[dict]) -> list[str]:
     """Table 1's contenders rerun as the paper describes its implementation: a heading that names the overrides, as
     read from the record's commands, and the comparison ([] while no task is complete)."""
     other = records.read_rows(results / "table1_1m_paperimpl_runs.csv")
-    compared = implementation_scores(records.read_rows(results / "table1_1m_runs.csv"), other, randoms)
+    compared = implementation_scores(default_runs, other, randoms)
     if not compared:
         return []
     return [
@@ -486,6 +486,8 @@ def readme_blocks(results) -> dict[str, str]:
             *same_math,
         ]
     table1_1m = records.read_rows(results / "table1_1m.csv")
+    full_runs = records.read_rows(results / "table1_1m_runs.csv")
+    randoms = records.read_rows(results / "random.csv")
     full_length = []
     if table1_1m:
         tasks = table1_1m[0]["task_ids"].split()
@@ -498,20 +500,18 @@ def readme_blocks(results) -> dict[str, str]:
             else f"At the paper's 1M steps, on {len(tasks)} of the paper's 7 tasks ({names}):"
         )
         shorter = "The first reduction, on three tasks at 250k steps:"
-        by_task = table1_by_task(
-            table1_1m, records.read_rows(results / "table1_1m_runs.csv"), records.read_rows(results / "random.csv")
-        )
+        by_task = table1_by_task(table1_1m, full_runs, randoms)
         leader = leader_sentence(by_task)
         note = " Every setting's score task by task is in `benchmarks/results/summary.md`."
         full_length = [heading, "", *table1_lines(table1_1m, []), *(["", leader + note] if leader else [])]
-        described = implementation_block(results, records.read_rows(results / "random.csv"))
+        described = implementation_block(results, full_runs, randoms)
         full_length += ["", *described] if described else []
         full_length += ["", shorter, ""]
     return {
         "mujoco": "\n".join(
             mujoco_table(stats)
             + (["", *recheck] if recheck else [])
-            + current_code_lines(records.read_rows(results / "table1_1m_runs.csv"))
+            + current_code_lines(full_runs)
             + (["", *float64] if float64 else [])
             + (["", *same_math] if same_math else [])
         ),
@@ -648,11 +648,12 @@ def build(results, runs_root) -> tuple[str, list[str]]:
     table1_1m = records.read_rows(results / "table1_1m.csv")
     if table1_1m:
         parts += ["## Table 1: surrogate objectives, 1M steps a run", "", *table1_lines(table1_1m, randoms), ""]
-        by_task = table1_by_task(table1_1m, records.read_rows(results / "table1_1m_runs.csv"), randoms)
+        full_runs = records.read_rows(results / "table1_1m_runs.csv")
+        by_task = table1_by_task(table1_1m, full_runs, randoms)
         parts += ["Each setting's score task by task (the mean of its seeds' normalised returns):", ""]
         parts += [*table1_task_lines(by_task), ""]
         parts += ["![Table 1 at 1M steps: minippo's scores beside the paper's](table1_1m.png)", ""]
-        described = implementation_block(results, randoms)
+        described = implementation_block(results, full_runs, randoms)
         parts += [*described, ""] if described else []
         details = one_detail_lines(results)
         parts += [
