@@ -177,9 +177,7 @@ def table1_lines(table: list[dict], randoms: list[dict]) -> list[str]:
         "|---|---:|---:|---:|",
     ]
     for row in table:
-        lines.append(
-            f"| {row['setting']} | {score_text(row)} | {row['runs']} | {float(row['paper_score']):.2f} |"
-        )
+        lines.append(f"| {row['setting']} | {score_text(row)} | {row['runs']} | {float(row['paper_score']):.2f} |")
     lines += ["", table1_verdict(table)]
     if randoms:
         lines += [
@@ -299,9 +297,7 @@ def versus_sentence(by_task: dict[str, dict[str, float]], first: str, second: st
     for task in by_task[first]:
         a, b = round(by_task[first][task], 2), round(by_task[second][task], 2)
         groups["higher" if a > b else "lower" if a < b else "the same to two decimals"].append(task)
-    parts = [
-        f"{how} on {len(tasks)}" + (f" ({', '.join(tasks)})" if tasks else "") for how, tasks in groups.items()
-    ]
+    parts = [f"{how} on {len(tasks)}" + (f" ({', '.join(tasks)})" if tasks else "") for how, tasks in groups.items()]
     return f"Task by task, against {second}, {first} scores " + ", ".join(parts[:-1]) + f" and {parts[-1]}."
 
 
@@ -367,9 +363,10 @@ def implementation_lines(compared: dict) -> list[str]:
 
 def common_overrides(rows: list[dict]) -> list[str]:
     """The ``--config`` KEY=VALUE pairs that every row's command carries (a setting's own pairs differ by row)."""
+
     def pairs(command):
         words = command.split("&&")[-1].split()
-        return words[words.index("--config") + 1:] if "--config" in words else []
+        return words[words.index("--config") + 1 :] if "--config" in words else []
 
     shared = [pair for pair in pairs(rows[0]["command"]) if "=" in pair] if rows else []
     return [pair for pair in shared if all(pair in pairs(row["command"]) for row in rows)]
@@ -656,14 +653,18 @@ def build(results, runs_root) -> tuple[str, list[str]]:
         described = implementation_block(results, full_runs, randoms)
         parts += [*described, ""] if described else []
         details = one_detail_lines(results)
-        parts += [
-            "No clipping or penalty, 1M steps, with one of the three details off at a time "
-            "(`cpi_without_<detail>_runs.csv`): mean return of the last 100 episodes over the seeds (seeds in "
-            "brackets).",
-            "",
-            *details,
-            "",
-        ] if details else []
+        parts += (
+            [
+                "No clipping or penalty, 1M steps, with one of the three details off at a time "
+                "(`cpi_without_<detail>_runs.csv`): mean return of the last 100 episodes over the seeds (seeds in "
+                "brackets).",
+                "",
+                *details,
+                "",
+            ]
+            if details
+            else []
+        )
     parts += ["## Table 1: surrogate objectives, reduced scale", "", *table1_lines(table1, randoms), ""]
     if table1:
         parts += ["![Table 1: minippo's scores beside the paper's](table1.png)", ""]

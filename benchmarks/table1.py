@@ -50,9 +50,7 @@ SEEDS = [1, 2, 3]
 STEPS = 250_000
 RANDOM_EPISODES, RANDOM_SEED = 100, 0
 RUN_FIELDS = ["setting", "env", "seed", "steps", "return_mean", "wall_s", "steps_per_s", "commit", "command"]
-TABLE_FIELDS = [
-    "setting", "score", "score_se", "paper_score", "runs", "tasks", "task_ids", "seeds", "steps", "scale"
-]
+TABLE_FIELDS = ["setting", "score", "score_se", "paper_score", "runs", "tasks", "task_ids", "seeds", "steps", "scale"]
 RUNS_CSV = records.RESULTS / "table1_runs.csv"
 TABLE_CSV = records.RESULTS / "table1.csv"
 RUN_ROOT = records.RUNS / "table1"

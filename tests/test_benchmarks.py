@@ -125,8 +125,17 @@ def test_write_table_keeps_the_paper_column_and_order(tmp_path):
 
 def test_write_table_scores_only_the_tasks_whose_runs_are_all_recorded(tmp_path):
     def run(setting, env_id, seed, value):
-        return {"setting": setting, "env": env_id, "seed": seed, "steps": 4096, "return_mean": value, "wall_s": 1,
-                "steps_per_s": 1, "commit": "x", "command": "c"}
+        return {
+            "setting": setting,
+            "env": env_id,
+            "seed": seed,
+            "steps": 4096,
+            "return_mean": value,
+            "wall_s": 1,
+            "steps_per_s": 1,
+            "commit": "x",
+            "command": "c",
+        }
 
     clip, cpi = "Clipping, ε = 0.2", "No clipping or penalty"
     runs = [run(clip, "A", 1, 100.0), run(cpi, "A", 1, 50.0), run(clip, "A", 2, 80.0), run(cpi, "A", 2, 40.0)]
@@ -397,8 +406,16 @@ def test_table1_verdict_reads_the_ranks():
 
 def test_the_later_code_table_reads_only_the_default_objective_runs():
     def run(setting, seed, value):
-        return {"setting": setting, "env": "Hopper-v5", "seed": str(seed), "steps": "999424",
-                "return_mean": str(value), "wall_s": "60", "steps_per_s": "100", "commit": "abc1234"}
+        return {
+            "setting": setting,
+            "env": "Hopper-v5",
+            "seed": str(seed),
+            "steps": "999424",
+            "return_mean": str(value),
+            "wall_s": "60",
+            "steps_per_s": "100",
+            "commit": "abc1234",
+        }
 
     rows = [run("Clipping, ε = 0.2", seed, value) for seed, value in ((1, 2100), (2, 2300), (3, 2500))]
     rows.append(run("No clipping or penalty", 1, 5))
@@ -411,8 +428,16 @@ def test_the_later_code_table_reads_only_the_default_objective_runs():
 
 def test_the_recheck_sentence_gives_each_seed_and_the_commit():
     rows = [
-        {"env": "Hopper-v5", "seed": str(seed), "steps": "999424", "return_mean": str(value), "steps_per_s": "1",
-         "wall_s": "1", "commit": "abc1234", "command": "c"}
+        {
+            "env": "Hopper-v5",
+            "seed": str(seed),
+            "steps": "999424",
+            "return_mean": str(value),
+            "steps_per_s": "1",
+            "wall_s": "1",
+            "commit": "abc1234",
+            "command": "c",
+        }
         for seed, value in ((2, 2100.0), (1, 2300.0))
     ]
     (line,) = summary.recheck_lines(rows)
@@ -421,8 +446,16 @@ def test_the_recheck_sentence_gives_each_seed_and_the_commit():
 
 def test_the_same_math_sentence_says_where_the_runs_part():
     def row(env_id, update, difference):
-        return {"env": env_id, "seed": "1", "dtype": "float64", "update": str(update), "earlier_commit": "abc1234",
-                "commit": "def5678", "max_relative_difference": str(difference), "command": "python same_math.py"}
+        return {
+            "env": env_id,
+            "seed": "1",
+            "dtype": "float64",
+            "update": str(update),
+            "earlier_commit": "abc1234",
+            "commit": "def5678",
+            "max_relative_difference": str(difference),
+            "command": "python same_math.py",
+        }
 
     rows = [row("Hopper-v5", 1, 1e-15), row("Hopper-v5", 2, 3e-3), row("Hopper-v5", 3, 0.2), row("Hopper-v5", 4, 0.01)]
     rows += [row("Swimmer-v5", 2, 2e-11), row("Swimmer-v5", 1, 4e-16)]
@@ -463,16 +496,23 @@ def test_table1_by_task_scores_each_task_as_the_table_does():
         return {"setting": setting, "env": env_id, "seed": str(seed), "steps": steps, "return_mean": str(value)}
 
     runs = [
-        run("Clipping, ε = 0.2", "A", 1, 50), run("Clipping, ε = 0.2", "A", 2, 30),
-        run("Fixed KL, β = 3", "A", 1, 110), run("Fixed KL, β = 3", "A", 2, 90),
-        run("Clipping, ε = 0.2", "B", 1, 10), run("Fixed KL, β = 3", "B", 1, 10),
+        run("Clipping, ε = 0.2", "A", 1, 50),
+        run("Clipping, ε = 0.2", "A", 2, 30),
+        run("Fixed KL, β = 3", "A", 1, 110),
+        run("Fixed KL, β = 3", "A", 2, 90),
+        run("Clipping, ε = 0.2", "B", 1, 10),
+        run("Fixed KL, β = 3", "B", 1, 10),
         run("Fixed KL, β = 3", "C", 1, 999),  # not among the table's tasks
         run("Fixed KL, β = 3", "A", 3, 999, steps="2048"),  # another scale
     ]
-    randoms = [{"env": env_id, "return_mean": value, "episodes": "100", "seed": "0"}
-               for env_id, value in (("A", "10"), ("B", "0"), ("C", "10"))]
-    table = [{"setting": "Clipping, ε = 0.2", "task_ids": "A B", "steps": "4096"},
-             {"setting": "Fixed KL, β = 3", "task_ids": "A B", "steps": "4096"}]
+    randoms = [
+        {"env": env_id, "return_mean": value, "episodes": "100", "seed": "0"}
+        for env_id, value in (("A", "10"), ("B", "0"), ("C", "10"))
+    ]
+    table = [
+        {"setting": "Clipping, ε = 0.2", "task_ids": "A B", "steps": "4096"},
+        {"setting": "Fixed KL, β = 3", "task_ids": "A B", "steps": "4096"},
+    ]
     by_task = summary.table1_by_task(table, runs, randoms)
     # task A: random 10, best 110, so (50-10)/100 and (30-10)/100 average 0.3; task B: random 0, best 10
     assert by_task["Clipping, ε = 0.2"] == pytest.approx({"A": 0.3, "B": 1.0})
@@ -497,18 +537,25 @@ def test_two_implementations_are_scored_on_one_scale_over_complete_tasks():
 
     clip, beta, cpi = "Clipping, ε = 0.2", "Fixed KL, β = 3", "No clipping or penalty"
     default = [
-        run(clip, "Hopper-v5", 1, 60), run(clip, "Hopper-v5", 2, 40),
-        run(beta, "Hopper-v5", 1, 90), run(beta, "Hopper-v5", 2, 70),
-        run(cpi, "Hopper-v5", 1, 110), run(cpi, "Hopper-v5", 2, 10),  # not run the other way, but sets the best
-        run(clip, "Swimmer-v5", 1, 50), run(beta, "Swimmer-v5", 1, 50),
+        run(clip, "Hopper-v5", 1, 60),
+        run(clip, "Hopper-v5", 2, 40),
+        run(beta, "Hopper-v5", 1, 90),
+        run(beta, "Hopper-v5", 2, 70),
+        run(cpi, "Hopper-v5", 1, 110),
+        run(cpi, "Hopper-v5", 2, 10),  # not run the other way, but sets the best
+        run(clip, "Swimmer-v5", 1, 50),
+        run(beta, "Swimmer-v5", 1, 50),
     ]
     other = [
-        run(clip, "Hopper-v5", 1, 80), run(clip, "Hopper-v5", 2, 60),
-        run(beta, "Hopper-v5", 1, 30), run(beta, "Hopper-v5", 2, 10),
+        run(clip, "Hopper-v5", 1, 80),
+        run(clip, "Hopper-v5", 2, 60),
+        run(beta, "Hopper-v5", 1, 30),
+        run(beta, "Hopper-v5", 2, 10),
         run(clip, "Swimmer-v5", 1, 99),  # Swimmer lacks β = 3 here: not scored, not even in the best
     ]
-    randoms = [{"env": env_id, "return_mean": "10", "episodes": "100", "seed": "0"}
-               for env_id in ("Hopper-v5", "Swimmer-v5")]
+    randoms = [
+        {"env": env_id, "return_mean": "10", "episodes": "100", "seed": "0"} for env_id in ("Hopper-v5", "Swimmer-v5")
+    ]
     compared = summary.implementation_scores(default, other, randoms)
     assert list(compared) == [clip, beta]  # Table 1's order, only the settings run both ways
     # Hopper: random 10, best 110 (the defaults' unclipped seed 1), so a return r scores (r - 10) / 100
@@ -533,8 +580,13 @@ def test_two_implementations_are_scored_on_one_scale_over_complete_tasks():
 
 def test_one_detail_table_puts_each_detail_between_all_on_and_all_off(tmp_path):
     def run(env_id, seed, value):
-        return {"setting": "No clipping or penalty", "env": env_id, "seed": str(seed), "steps": "4096",
-                "return_mean": str(value)}
+        return {
+            "setting": "No clipping or penalty",
+            "env": env_id,
+            "seed": str(seed),
+            "steps": "4096",
+            "return_mean": str(value),
+        }
 
     assert summary.one_detail_lines(tmp_path) == []  # nothing recorded yet
     write_csv(tmp_path / "table1_1m_runs.csv", [run("IP", 1, 100), run("IP", 2, 200), run("Other", 1, 5)])

@@ -58,8 +58,10 @@ def test_a_float32_agent_computes_its_gradients_in_float32(rng, kind, objective,
     """One float64 number in the chain (a NumPy float64 scalar is enough) would turn every matmul of the backward
     pass into float64 and cost a third of the update's time, without changing any result visibly."""
     agent = ActorCritic(4, kind, 3, hidden_sizes=(8, 8), rng=rng, dtype="float32")
-    mb = {key: value.astype(np.float32) if value.dtype.kind == "f" else value
-          for key, value in minibatch(agent, rng).items()}
+    mb = {
+        key: value.astype(np.float32) if value.dtype.kind == "f" else value
+        for key, value in minibatch(agent, rng).items()
+    }
     seen = {}
     backward = agent.backward
 
