@@ -339,9 +339,10 @@ def implementation_lines(compared: dict) -> list[str]:
         return score_text({"score": score["score"], "score_se": score["se"]})
 
     first = next(iter(compared.values()))[1]
+    how_many = "All" if len(compared) == len(TABLE1_PAPER) else str(len(compared))
     lines = [
-        f"{len(compared)} of Table 1's settings, {first['tasks']} tasks, {first['runs']} runs each way. Score: per "
-        "task the random policy 0 and the best run of either record 1.",
+        f"{how_many} of Table 1's {len(TABLE1_PAPER)} settings, {first['tasks']} tasks, {first['runs']} runs each way. "
+        "Score: per task the random policy 0 and the best run of either record 1.",
         "",
         "| Setting | minippo's defaults | as the paper describes it | paper (Table 1) |",
         "|---|---:|---:|---:|",
@@ -379,8 +380,9 @@ def implementation_block(results, default_runs: list[dict], randoms: list[dict])
     compared = implementation_scores(default_runs, other, randoms)
     if not compared:
         return []
+    which = "All of these settings" if len(compared) == len(TABLE1_PAPER) else "Some of these settings"
     return [
-        "Some of these settings again, as the paper describes them: `--config "
+        f"{which} again, as the paper describes them: `--config "
         + " ".join(common_overrides(other))
         + "` (no gradient-norm clip, no value clip, no reward scaling: three details that minippo's defaults "
         "include and the paper does not describe), the same tasks, seeds and steps "

@@ -563,6 +563,9 @@ def test_two_implementations_are_scored_on_one_scale_over_complete_tasks():
     assert compared[beta][0]["score"] == pytest.approx(0.7) and compared[beta][1]["score"] == pytest.approx(0.1)
     assert compared[clip][1]["tasks"] == 1 and compared[clip][1]["runs"] == 2
     lines = summary.implementation_lines(compared)
+    assert lines[0].startswith("2 of Table 1's 11 settings, 1 tasks, 2 runs each way.")
+    whole = {setting: compared[clip] for setting in summary.TABLE1_PAPER}  # every row rerun: the text says so
+    assert summary.implementation_lines(whole)[0].startswith("All of Table 1's 11 settings,")
     assert lines[4] == "| Clipping, ε = 0.2 | 0.40 ± 0.10 | 0.60 ± 0.10 | 0.82 |"
     assert lines[-1] == (
         "Among these settings Clipping, ε = 0.2 ranks 2 of 2 with minippo's defaults, behind Fixed KL, β = 3; "
