@@ -392,6 +392,81 @@ def implementation_block(results, default_runs: list[dict], randoms: list[dict])
     ]
 
 
+MORE_SEEDS_CSV = "table1_1m_more_seeds_runs.csv"
+
+
+def more_seeds_scores(default_runs: list[dict], more_runs: list[dict], randoms: list[dict]) -> dict:
+    """Settings of the 1M-step table run again with new seeds (same code, same steps), on one scale with the table.
+
+    Only the tasks on which ``more_runs`` has every one of its settings at each of its seeds are scored. Per task the
+    random policy is 0 and the best run of either record (every setting of the table included) is 1. Returns
+    {setting: {"table": scores at the table's seeds, "new": at the new seeds, "all": at both}}, each as
+    ``normalized_scores`` gives them, in the order of Table 1; {} while no task is complete."""
+    if not more_runs:
+        return {}
+    settings = {run["setting"] for run in more_runs}
+    steps = {run["steps"] for run in more_runs}
+    tasks = complete_tasks(more_runs, TASKS, sorted({int(run["seed"]) for run in more_runs}))
+    if not tasks:
+        return {}
+    table = [run for run in default_runs if run["env"] in tasks and run["steps"] in steps]
+    new = [run for run in more_runs if run["env"] in tasks]
+    randoms = random_returns(randoms)
+
+    def tagged(runs, tag):
+        return [{**run, "setting": run["setting"] + tag} if run["setting"] in settings else run for run in runs]
+
+    apart = normalized_scores(tagged(table, " @table") + tagged(new, " @new"), randoms)
+    together = normalized_scores(table + new, randoms)  # the same runs, so the same best run and scale
+    return {
+        setting: {"table": apart[setting + " @table"], "new": apart[setting + " @new"], "all": together[setting]}
+        for setting in TABLE1_PAPER
+        if setting in settings and setting + " @table" in apart
+    }
+
+
+def seed_range(runs: list[dict]) -> str:
+    """'1–3' for seeds 1, 2, 3; '1, 5' for seeds that do not run on."""
+    seeds = sorted({int(run["seed"]) for run in runs})
+    if seeds == list(range(seeds[0], seeds[-1] + 1)) and len(seeds) > 2:
+        return f"{seeds[0]}–{seeds[-1]}"
+    return ", ".join(str(seed) for seed in seeds)
+
+
+def more_seeds_block(results, default_runs: list[dict], randoms: list[dict]) -> list[str]:
+    """The strongest settings of the 1M-step table with more seeds: a table of their scores at the table's seeds, at
+    the new seeds and at both, and how far apart the first two settings are at both ([] while no task is complete)."""
+    more = records.read_rows(Path(results) / MORE_SEEDS_CSV)
+    scores = more_seeds_scores(default_runs, more, randoms)
+    if not scores:
+        return []
+    tasks = {run["env"] for run in more} & set(next(iter(scores.values()))["all"]["per_task"])
+    table_seeds = seed_range([run for run in default_runs if run["setting"] in scores and run["env"] in tasks])
+    new_seeds = seed_range([run for run in more if run["env"] in tasks])
+    lines = [
+        f"The closest of these settings again at the defaults with new seeds (`benchmarks/results/{MORE_SEEDS_CSV}`, "
+        f"seeds {new_seeds}, the same code and steps), {len(tasks)} tasks. Score: per task the random policy 0 and the "
+        "best run of either record 1.",
+        "",
+        f"| Setting | seeds {table_seeds} | seeds {new_seeds} | all seeds | paper (Table 1) |",
+        "|---|---:|---:|---:|---:|",
+    ]
+    for setting, score in scores.items():
+        cells = " | ".join(score_text({"score": s["score"], "score_se": s["se"]}) for s in score.values())
+        lines.append(f"| {setting} | {cells} | {TABLE1_PAPER[setting]:.2f} |")
+    if len(scores) == 2:
+        (first, a), (second, b) = ((name, score["all"]) for name, score in scores.items())
+        gap = a["score"] - b["score"]
+        se = math.sqrt((a["se"] or 0.0) ** 2 + (b["se"] or 0.0) ** 2)
+        ahead, behind = (first, second) if gap >= 0 else (second, first)
+        size = f", {abs(gap) / se:.1f} standard errors of the difference" if se > 0 else ""
+        lines += [
+            "",
+            f"Over all seeds {ahead} scores {abs(gap):.2f} above {behind} ({a['runs']} runs each{size}).",
+        ]
+    return lines
+
+
 DETAILS = ["grad_norm_clipping", "clip_value_loss", "scale_rewards"]
 
 
@@ -505,6 +580,8 @@ def readme_blocks(results) -> dict[str, str]:
         full_length = [heading, "", *table1_lines(table1_1m, []), *(["", leader + note] if leader else [])]
         described = implementation_block(results, full_runs, randoms)
         full_length += ["", *described] if described else []
+        more = more_seeds_block(results, full_runs, randoms)
+        full_length += ["", *more] if more else []
         full_length += ["", shorter, ""]
     return {
         "mujoco": "\n".join(
@@ -654,6 +731,8 @@ def build(results, runs_root) -> tuple[str, list[str]]:
         parts += ["![Table 1 at 1M steps: minippo's scores beside the paper's](table1_1m.png)", ""]
         described = implementation_block(results, full_runs, randoms)
         parts += [*described, ""] if described else []
+        more = more_seeds_block(results, full_runs, randoms)
+        parts += [*more, ""] if more else []
         details = one_detail_lines(results)
         parts += (
             [

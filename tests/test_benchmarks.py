@@ -581,6 +581,53 @@ def test_two_implementations_are_scored_on_one_scale_over_complete_tasks():
     assert list(summary.implementation_scores(default, other[:2], randoms)) == [clip]  # one setting, all seeds
 
 
+def test_more_seeds_are_scored_with_the_table_on_one_scale(tmp_path):
+    def run(setting, env_id, seed, value):
+        return {"setting": setting, "env": env_id, "seed": str(seed), "steps": "4096", "return_mean": str(value)}
+
+    clip, beta, cpi = "Clipping, ε = 0.2", "Fixed KL, β = 3", "No clipping or penalty"
+    table = [
+        run(clip, "Hopper-v5", 1, 60),
+        run(clip, "Hopper-v5", 2, 40),
+        run(beta, "Hopper-v5", 1, 90),
+        run(beta, "Hopper-v5", 2, 70),
+        run(cpi, "Hopper-v5", 1, 110),  # not rerun, but sets the best
+        run(clip, "Swimmer-v5", 1, 50),
+        run(beta, "Swimmer-v5", 1, 50),
+    ]
+    more = [
+        run(clip, "Hopper-v5", 3, 80),
+        run(clip, "Hopper-v5", 4, 60),
+        run(beta, "Hopper-v5", 3, 50),
+        run(beta, "Hopper-v5", 4, 10),
+        run(clip, "Swimmer-v5", 3, 999),  # Swimmer lacks β = 3 and seed 4: not scored, not even in the best
+    ]
+    randoms = [
+        {"env": env_id, "return_mean": "10", "episodes": "100", "seed": "0"} for env_id in ("Hopper-v5", "Swimmer-v5")
+    ]
+    scores = summary.more_seeds_scores(table, more, randoms)
+    assert list(scores) == [clip, beta]  # Table 1's order, only the settings run again
+    # Hopper: random 10, best 110, so a return r scores (r - 10) / 100
+    assert [scores[clip][part]["score"] for part in ("table", "new", "all")] == pytest.approx([0.4, 0.6, 0.5])
+    assert [scores[beta][part]["score"] for part in ("table", "new", "all")] == pytest.approx([0.7, 0.2, 0.45])
+    assert scores[clip]["all"]["runs"] == 4 and scores[clip]["all"]["tasks"] == 1
+    assert summary.more_seeds_scores(table, [], randoms) == {}
+    assert summary.more_seeds_scores(table, more[:3], randoms) == {}  # Hopper lacks β = 3 at seed 4
+
+    write_csv(tmp_path / summary.MORE_SEEDS_CSV, more)
+    lines = summary.more_seeds_block(tmp_path, table, randoms)
+    assert lines[2] == "| Setting | seeds 1, 2 | seeds 3, 4 | all seeds | paper (Table 1) |"
+    assert lines[4] == "| Clipping, ε = 0.2 | 0.40 ± 0.10 | 0.60 ± 0.10 | 0.50 ± 0.08 | 0.82 |"
+    # all seeds: ε = 0.2's variance over [0.5, 0.3, 0.7, 0.5] is 0.08/3, β = 3's over [0.8, 0.6, 0.4, 0.0] is 0.35/3,
+    # so the difference 0.05 has standard error sqrt((0.08 + 0.35) / 12) = 0.189
+    assert lines[-1] == (
+        "Over all seeds Clipping, ε = 0.2 scores 0.05 above Fixed KL, β = 3 (4 runs each, 0.3 standard errors of the "
+        "difference)."
+    )
+    assert summary.more_seeds_block(tmp_path / "nothing", table, randoms) == []
+    assert summary.seed_range([{"seed": "4"}, {"seed": "6"}, {"seed": "5"}]) == "4–6"
+
+
 def test_one_detail_table_puts_each_detail_between_all_on_and_all_off(tmp_path):
     def run(env_id, seed, value):
         return {
