@@ -443,10 +443,12 @@ def more_seeds_block(results, default_runs: list[dict], randoms: list[dict]) -> 
     tasks = {run["env"] for run in more} & set(next(iter(scores.values()))["all"]["per_task"])
     table_seeds = seed_range([run for run in default_runs if run["setting"] in scores and run["env"] in tasks])
     new_seeds = seed_range([run for run in more if run["env"] in tasks])
+    names = " and ".join(scores)
+    count = f"{len(tasks)} task" + ("" if len(tasks) == 1 else "s")
     lines = [
-        f"The closest of these settings again at the defaults with new seeds (`benchmarks/results/{MORE_SEEDS_CSV}`, "
-        f"seeds {new_seeds}, the same code and steps), {len(tasks)} tasks. Score: per task the random policy 0 and the "
-        "best run of either record 1.",
+        f"{names} again with minippo's defaults and new seeds (`benchmarks/results/{MORE_SEEDS_CSV}`, seeds "
+        f"{new_seeds}, the same code and steps), on the {count} where each has every new seed. Score: per "
+        "task the random policy 0 and the best run of either record 1.",
         "",
         f"| Setting | seeds {table_seeds} | seeds {new_seeds} | all seeds | paper (Table 1) |",
         "|---|---:|---:|---:|---:|",
