@@ -135,6 +135,11 @@ def score_text(row: dict) -> str:
     return f"{float(row['score']):.2f}" + (f" ± {float(se):.2f}" if se not in (None, "") else "")
 
 
+def scored_text(score: dict) -> str:
+    """``score_text`` for a setting's scores as ``normalized_scores`` gives them."""
+    return score_text({"score": score["score"], "score_se": score["se"]})
+
+
 def table1_verdict(table: list[dict]) -> str:
     """Where the paper's two landmarks rank here: clipping at ε = 0.2 (the paper's best) and no clipping (its worst)."""
     ranked = sorted(table, key=lambda row: -float(row["score"]))
@@ -304,6 +309,14 @@ def versus_sentence(by_task: dict[str, dict[str, float]], first: str, second: st
 OTHER_TAG = " (as the paper describes it)"
 
 
+def rerun_pool(default_runs: list[dict], other_runs: list[dict], seeds) -> tuple[list[str], list[dict]]:
+    """The tasks on which ``other_runs`` has every one of its settings at each of ``seeds``, and the runs of
+    ``default_runs`` on those tasks at the steps of ``other_runs``: what a rerun is scored with, on one scale."""
+    steps = {run["steps"] for run in other_runs}
+    tasks = complete_tasks(other_runs, TASKS, seeds)
+    return tasks, [run for run in default_runs if run["env"] in tasks and run["steps"] in steps]
+
+
 def implementation_scores(default_runs: list[dict], other_runs: list[dict], randoms: list[dict]) -> dict:
     """Table 1's settings that ran both with minippo's defaults and with other ``--config`` overrides, on one scale.
 
@@ -316,11 +329,9 @@ def implementation_scores(default_runs: list[dict], other_runs: list[dict], rand
     if not other_runs:
         return {}
     seeds = sorted({int(run["seed"]) for run in default_runs})  # a task counts once it has the defaults' seeds
-    steps = {run["steps"] for run in other_runs}
-    tasks = complete_tasks(other_runs, TASKS, seeds)
+    tasks, pool = rerun_pool(default_runs, other_runs, seeds)
     if not tasks:
         return {}
-    pool = [run for run in default_runs if run["env"] in tasks and run["steps"] in steps]
     pool += [{**run, "setting": run["setting"] + OTHER_TAG} for run in other_runs if run["env"] in tasks]
     scores = normalized_scores(pool, random_returns(randoms))
     return {
@@ -335,9 +346,6 @@ def implementation_lines(compared: dict) -> list[str]:
     if not compared:
         return []
 
-    def text(score):
-        return score_text({"score": score["score"], "score_se": score["se"]})
-
     first = next(iter(compared.values()))[1]
     how_many = "All" if len(compared) == len(TABLE1_PAPER) else str(len(compared))
     lines = [
@@ -348,7 +356,7 @@ def implementation_lines(compared: dict) -> list[str]:
         "|---|---:|---:|---:|",
     ]
     for setting, (ours, other) in compared.items():
-        lines.append(f"| {setting} | {text(ours)} | {text(other)} | {TABLE1_PAPER[setting]:.2f} |")
+        lines.append(f"| {setting} | {scored_text(ours)} | {scored_text(other)} | {TABLE1_PAPER[setting]:.2f} |")
     clip = "Clipping, ε = 0.2"
     if clip in compared and len(compared) > 1:
         ranks = []
@@ -395,6 +403,13 @@ def implementation_block(results, default_runs: list[dict], randoms: list[dict])
 MORE_SEEDS_CSV = "table1_1m_more_seeds_runs.csv"
 
 
+def rerun_blocks(results, default_runs: list[dict], randoms: list[dict]) -> list[str]:
+    """The 1M-step table's reruns, each followed by a blank line: as the paper describes its implementation, and
+    with more seeds ([] while neither has a complete task)."""
+    blocks = [implementation_block(results, default_runs, randoms), more_seeds_block(results, default_runs, randoms)]
+    return [line for block in blocks if block for line in (*block, "")]
+
+
 def more_seeds_scores(default_runs: list[dict], more_runs: list[dict], randoms: list[dict]) -> dict:
     """Settings of the 1M-step table run again with new seeds (same code, same steps), on one scale with the table.
 
@@ -405,11 +420,9 @@ def more_seeds_scores(default_runs: list[dict], more_runs: list[dict], randoms: 
     if not more_runs:
         return {}
     settings = {run["setting"] for run in more_runs}
-    steps = {run["steps"] for run in more_runs}
-    tasks = complete_tasks(more_runs, TASKS, sorted({int(run["seed"]) for run in more_runs}))
+    tasks, table = rerun_pool(default_runs, more_runs, sorted({int(run["seed"]) for run in more_runs}))
     if not tasks:
         return {}
-    table = [run for run in default_runs if run["env"] in tasks and run["steps"] in steps]
     new = [run for run in more_runs if run["env"] in tasks]
     randoms = random_returns(randoms)
 
@@ -440,7 +453,7 @@ def more_seeds_block(results, default_runs: list[dict], randoms: list[dict]) -> 
     scores = more_seeds_scores(default_runs, more, randoms)
     if not scores:
         return []
-    tasks = {run["env"] for run in more} & set(next(iter(scores.values()))["all"]["per_task"])
+    tasks = set(next(iter(scores.values()))["all"]["per_task"])  # the tasks more_seeds_scores counted
     table_seeds = seed_range([run for run in default_runs if run["setting"] in scores and run["env"] in tasks])
     new_seeds = seed_range([run for run in more if run["env"] in tasks])
     names = " and ".join(scores)
@@ -454,7 +467,7 @@ def more_seeds_block(results, default_runs: list[dict], randoms: list[dict]) -> 
         "|---|---:|---:|---:|---:|",
     ]
     for setting, score in scores.items():
-        cells = " | ".join(score_text({"score": s["score"], "score_se": s["se"]}) for s in score.values())
+        cells = " | ".join(scored_text(s) for s in score.values())
         lines.append(f"| {setting} | {cells} | {TABLE1_PAPER[setting]:.2f} |")
     if len(scores) == 2:
         (first, a), (second, b) = ((name, score["all"]) for name, score in scores.items())
@@ -580,11 +593,7 @@ def readme_blocks(results) -> dict[str, str]:
         leader = leader_sentence(by_task)
         note = " Every setting's score task by task is in `benchmarks/results/summary.md`."
         full_length = [heading, "", *table1_lines(table1_1m, []), *(["", leader + note] if leader else [])]
-        described = implementation_block(results, full_runs, randoms)
-        full_length += ["", *described] if described else []
-        more = more_seeds_block(results, full_runs, randoms)
-        full_length += ["", *more] if more else []
-        full_length += ["", shorter, ""]
+        full_length += ["", *rerun_blocks(results, full_runs, randoms), shorter, ""]
     return {
         "mujoco": "\n".join(
             mujoco_table(stats)
@@ -731,10 +740,7 @@ def build(results, runs_root) -> tuple[str, list[str]]:
         parts += ["Each setting's score task by task (the mean of its seeds' normalised returns):", ""]
         parts += [*table1_task_lines(by_task), ""]
         parts += ["![Table 1 at 1M steps: minippo's scores beside the paper's](table1_1m.png)", ""]
-        described = implementation_block(results, full_runs, randoms)
-        parts += [*described, ""] if described else []
-        more = more_seeds_block(results, full_runs, randoms)
-        parts += [*more, ""] if more else []
+        parts += rerun_blocks(results, full_runs, randoms)
         details = one_detail_lines(results)
         parts += (
             [

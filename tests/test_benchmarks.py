@@ -27,6 +27,16 @@ def write_csv(path, rows):
         writer.writerows(rows)
 
 
+def table1_run(setting, env_id, seed, value, steps="4096"):
+    """One row of a Table 1 runs record, as the scoring reads it."""
+    return {"setting": setting, "env": env_id, "seed": str(seed), "steps": steps, "return_mean": str(value)}
+
+
+def random_rows(env_ids, value="10"):
+    """random.csv rows giving every task the same random-policy return."""
+    return [{"env": env_id, "return_mean": value, "episodes": "100", "seed": "0"} for env_id in env_ids]
+
+
 def fake_run(folder, updates, returns, horizon=2048, checkpoint_update=None):
     """A run folder as ``minippo train`` leaves it: progress.csv with one row per update, and a checkpoint."""
     folder.mkdir(parents=True, exist_ok=True)
@@ -492,9 +502,7 @@ def test_same_math_refuses_an_unknown_commit_on_one_line(capsys, tmp_path):
 
 
 def test_table1_by_task_scores_each_task_as_the_table_does():
-    def run(setting, env_id, seed, value, steps="4096"):
-        return {"setting": setting, "env": env_id, "seed": str(seed), "steps": steps, "return_mean": str(value)}
-
+    run = table1_run
     runs = [
         run("Clipping, ε = 0.2", "A", 1, 50),
         run("Clipping, ε = 0.2", "A", 2, 30),
@@ -532,9 +540,7 @@ def test_no_task_by_task_sentence_when_the_paper_setting_leads():
 
 
 def test_two_implementations_are_scored_on_one_scale_over_complete_tasks():
-    def run(setting, env_id, seed, value):
-        return {"setting": setting, "env": env_id, "seed": str(seed), "steps": "4096", "return_mean": str(value)}
-
+    run = table1_run
     clip, beta, cpi = "Clipping, ε = 0.2", "Fixed KL, β = 3", "No clipping or penalty"
     default = [
         run(clip, "Hopper-v5", 1, 60),
@@ -553,9 +559,7 @@ def test_two_implementations_are_scored_on_one_scale_over_complete_tasks():
         run(beta, "Hopper-v5", 2, 10),
         run(clip, "Swimmer-v5", 1, 99),  # Swimmer lacks β = 3 here: not scored, not even in the best
     ]
-    randoms = [
-        {"env": env_id, "return_mean": "10", "episodes": "100", "seed": "0"} for env_id in ("Hopper-v5", "Swimmer-v5")
-    ]
+    randoms = random_rows(["Hopper-v5", "Swimmer-v5"])
     compared = summary.implementation_scores(default, other, randoms)
     assert list(compared) == [clip, beta]  # Table 1's order, only the settings run both ways
     # Hopper: random 10, best 110 (the defaults' unclipped seed 1), so a return r scores (r - 10) / 100
@@ -582,9 +586,7 @@ def test_two_implementations_are_scored_on_one_scale_over_complete_tasks():
 
 
 def test_more_seeds_are_scored_with_the_table_on_one_scale(tmp_path):
-    def run(setting, env_id, seed, value):
-        return {"setting": setting, "env": env_id, "seed": str(seed), "steps": "4096", "return_mean": str(value)}
-
+    run = table1_run
     clip, beta, cpi = "Clipping, ε = 0.2", "Fixed KL, β = 3", "No clipping or penalty"
     table = [
         run(clip, "Hopper-v5", 1, 60),
@@ -602,9 +604,7 @@ def test_more_seeds_are_scored_with_the_table_on_one_scale(tmp_path):
         run(beta, "Hopper-v5", 4, 10),
         run(clip, "Swimmer-v5", 3, 999),  # Swimmer lacks β = 3 and seed 4: not scored, not even in the best
     ]
-    randoms = [
-        {"env": env_id, "return_mean": "10", "episodes": "100", "seed": "0"} for env_id in ("Hopper-v5", "Swimmer-v5")
-    ]
+    randoms = random_rows(["Hopper-v5", "Swimmer-v5"])
     scores = summary.more_seeds_scores(table, more, randoms)
     assert list(scores) == [clip, beta]  # Table 1's order, only the settings run again
     # Hopper: random 10, best 110, so a return r scores (r - 10) / 100
@@ -630,13 +630,7 @@ def test_more_seeds_are_scored_with_the_table_on_one_scale(tmp_path):
 
 def test_one_detail_table_puts_each_detail_between_all_on_and_all_off(tmp_path):
     def run(env_id, seed, value):
-        return {
-            "setting": "No clipping or penalty",
-            "env": env_id,
-            "seed": str(seed),
-            "steps": "4096",
-            "return_mean": str(value),
-        }
+        return table1_run("No clipping or penalty", env_id, seed, value)
 
     assert summary.one_detail_lines(tmp_path) == []  # nothing recorded yet
     write_csv(tmp_path / "table1_1m_runs.csv", [run("IP", 1, 100), run("IP", 2, 200), run("Other", 1, 5)])
