@@ -84,8 +84,12 @@ class ActorCritic:
         if self.kind == "continuous":
             self.grad_log_std[...] = 0.0 if grad_log_std is None else grad_log_std
 
-    def distribution(self, out: np.ndarray):
-        return Categorical(out) if self.kind == "discrete" else DiagGaussian(out, self.log_std)
+    def distribution(self, out: np.ndarray, log_std: np.ndarray | None = None):
+        """π(·|s) from the network's output: logits, or the mean with log σ (the live one unless ``log_std`` is given,
+        as it is for the old policy of a stored batch)."""
+        if self.kind == "discrete":
+            return Categorical(out)
+        return DiagGaussian(out, self.log_std if log_std is None else log_std)
 
     def policy_output(self, obs: np.ndarray) -> np.ndarray:
         """Logits or mean only, for acting (the rollout's hot path: no cache, no value)."""

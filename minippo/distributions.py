@@ -12,6 +12,13 @@ import numpy as np
 LOG_2PI = float(np.log(2.0 * np.pi))
 
 
+def _where_possible(probs: np.ndarray, terms) -> np.ndarray:
+    """``terms(probs)`` with 0 where the probability is 0: p·log p → 0 as p → 0, but 0·(−∞) is NaN in floating point
+    (computed, then discarded, so the warning it raises is silenced)."""
+    with np.errstate(invalid="ignore"):
+        return np.where(probs > 0.0, terms(probs), 0.0)
+
+
 class Categorical:
     """π(a|s) = softmax(z)_a for a batch of logits z of shape (n, k), for discrete action spaces."""
 
@@ -40,17 +47,19 @@ class Categorical:
         return (grad,)
 
     def entropy(self) -> np.ndarray:
-        """S = −Σ_j π_j log π_j."""
-        return -(self.probs * self.log_probs).sum(axis=-1)
+        """S = −Σ_j π_j log π_j, where an action of probability 0 adds 0 (the limit of p log p), not 0·(−∞)."""
+        return -_where_possible(self.probs, lambda p: p * self.log_probs).sum(axis=-1)
 
     def entropy_backward(self, grad_entropy: np.ndarray):
         """∂S/∂z_j = −π_j (log π_j + S)."""
         entropy = self.entropy()
-        return (-self.probs * (self.log_probs + entropy[:, None]) * grad_entropy[:, None],)
+        terms = _where_possible(self.probs, lambda p: p * (self.log_probs + entropy[:, None]))
+        return (-terms * grad_entropy[:, None],)
 
     def kl(self, other: Categorical) -> np.ndarray:
-        """KL[other ‖ self] = Σ_j π'_j (log π'_j − log π_j), with ``other`` the old policy π' (eq. 8's order)."""
-        return (other.probs * (other.log_probs - self.log_probs)).sum(axis=-1)
+        """KL[other ‖ self] = Σ_j π'_j (log π'_j − log π_j), with ``other`` the old policy π' (eq. 8's order); an
+        action the old policy never takes (π'_j = 0) adds 0."""
+        return _where_possible(other.probs, lambda p: p * (other.log_probs - self.log_probs)).sum(axis=-1)
 
     def kl_backward(self, other: Categorical, grad_kl: np.ndarray):
         """∂KL[π' ‖ π]/∂z_j = π_j − π'_j: only this (the new) policy's logits get a gradient."""
@@ -58,7 +67,11 @@ class Categorical:
 
 
 class DiagGaussian:
-    """π(a|s) = N(a; μ(s), diag σ²) with log σ a free vector shared by all states, for continuous actions."""
+    """π(a|s) = N(a; μ(s), diag σ²) with log σ a free vector shared by all states, for continuous actions.
+
+    ``log_std`` has shape (k,) for the policy being trained. The old policy π_θold of a stored batch may carry it as
+    (n, k), one copy per sample, since the batch is shuffled and cut into minibatches like every other per-sample
+    array; its log-probability, entropy and KL read it the same way (the backward functions are for the (k,) case)."""
 
     def __init__(self, mean: np.ndarray, log_std: np.ndarray):
         self.mean = mean
@@ -74,7 +87,7 @@ class DiagGaussian:
     def log_prob(self, actions: np.ndarray) -> np.ndarray:
         """log π(a|s) = −½ Σ_i ((a_i − μ_i)/σ_i)² − Σ_i log σ_i − (k/2) log 2π."""
         z = (actions - self.mean) / self.std
-        return -0.5 * (z * z).sum(axis=-1) - self.log_std.sum() - 0.5 * self.mean.shape[-1] * LOG_2PI
+        return -0.5 * (z * z).sum(axis=-1) - self.log_std.sum(axis=-1) - 0.5 * self.mean.shape[-1] * LOG_2PI
 
     def log_prob_backward(self, actions: np.ndarray, grad_logp: np.ndarray):
         """∂ log π/∂μ_i = (a_i − μ_i)/σ_i²;  ∂ log π/∂ log σ_i = ((a_i − μ_i)/σ_i)² − 1 (summed over the batch)."""
@@ -85,24 +98,29 @@ class DiagGaussian:
 
     def entropy(self) -> np.ndarray:
         """S = Σ_i (log σ_i + ½ log 2πe), the same for every state."""
-        value = float(self.log_std.sum() + 0.5 * self.mean.shape[-1] * (LOG_2PI + 1.0))
-        return np.full(self.mean.shape[0], value)
+        value = self.log_std.sum(axis=-1) + 0.5 * self.mean.shape[-1] * (LOG_2PI + 1.0)
+        return np.full(self.mean.shape[0], float(value)) if np.ndim(value) == 0 else value
 
     def entropy_backward(self, grad_entropy: np.ndarray):
         """∂S/∂μ = 0;  ∂S/∂ log σ_i = 1."""
         return np.zeros_like(self.mean), np.full(self.log_std.shape, grad_entropy.sum())
 
     def kl(self, other: DiagGaussian) -> np.ndarray:
-        """KL[other ‖ self] = Σ_i log σ_i/σ'_i + (σ'_i² + (μ'_i − μ_i)²) / (2σ_i²) − ½, ``other`` the old policy."""
-        var = self.std**2
-        return (self.log_std - other.log_std + (other.std**2 + (other.mean - self.mean) ** 2) / (2.0 * var) - 0.5).sum(
-            axis=-1
-        )
+        """KL[other ‖ self] = Σ_i log σ_i/σ'_i + (σ'_i² + (μ'_i − μ_i)²) / (2σ_i²) − ½, ``other`` the old policy.
+
+        With d_i = log σ_i − log σ'_i, the σ terms are d_i + ½(e^(−2d_i) − 1), computed with expm1: written as
+        σ'²/(2σ²) − ½ they subtract two numbers near ½ and keep only ~1e-4 of the KL's digits when σ barely moved."""
+        d = self.log_std - other.log_std
+        return (d + 0.5 * np.expm1(-2.0 * d) + (other.mean - self.mean) ** 2 / (2.0 * self.std**2)).sum(axis=-1)
 
     def kl_backward(self, other: DiagGaussian, grad_kl: np.ndarray):
-        """∂KL/∂μ_i = (μ_i − μ'_i)/σ_i²;  ∂KL/∂ log σ_i = 1 − (σ'_i² + (μ'_i − μ_i)²)/σ_i²."""
+        """∂KL/∂μ_i = (μ_i − μ'_i)/σ_i²;  ∂KL/∂ log σ_i = 1 − (σ'_i² + (μ'_i − μ_i)²)/σ_i², with 1 − σ'_i²/σ_i² computed
+        as −expm1(−2d_i).
+
+        Only this (the new) policy gets a gradient: π_θold, ``other``, is held fixed, its σ' included."""
         var = self.std**2
         diff = self.mean - other.mean
         grad_mean = diff / var * grad_kl[:, None]
-        grad_log_std = ((1.0 - (other.std**2 + diff**2) / var) * grad_kl[:, None]).sum(axis=0)
+        d = self.log_std - other.log_std
+        grad_log_std = ((-np.expm1(-2.0 * d) - diff**2 / var) * grad_kl[:, None]).sum(axis=0)
         return grad_mean, grad_log_std

@@ -178,7 +178,7 @@ def loss_and_grad(agent: ActorCritic, mb: dict, config: Config, kl_beta: float =
     elif config.objective == "pg":
         objective, grad_logp = losses.pg_objective(logp, advantages)
     else:
-        old = agent.distribution(mb["policy_out"])
+        old = old_policy(agent, mb)
         objective, grad_logp, grad_kl = losses.kl_penalty_objective(logp, mb["logp"], advantages, dist.kl(old), kl_beta)
     value_clip = config.clip_epsilon if config.clip_value_loss else None
     value_loss, grad_values = losses.value_loss(values, mb["returns"], mb["values"], value_clip)
@@ -202,6 +202,12 @@ def loss_and_grad(agent: ActorCritic, mb: dict, config: Config, kl_beta: float =
     }
 
 
+def old_policy(agent: ActorCritic, data: dict):
+    """π_θold as the batch stored it: its logits, or its means with its own log σ (not the live one, which the
+    update moves)."""
+    return agent.distribution(data["policy_out"], data["policy_log_std"])
+
+
 def update_minibatch(agent: ActorCritic, optimizer: Adam, mb: dict, config: Config, kl_beta: float = 1.0) -> dict:
     """One Adam step on one minibatch, after the global gradient-norm clip."""
     loss, stats = loss_and_grad(agent, mb, config, kl_beta)
@@ -223,6 +229,7 @@ def flatten(batch, advantages, returns, dtype) -> dict:
         "actions": batch.actions.reshape(T * N, *batch.actions.shape[2:]),
         "logp": batch.logp.reshape(-1),
         "policy_out": batch.policy_out.reshape(T * N, -1),
+        "policy_log_std": np.broadcast_to(batch.policy_log_std, (T * N, batch.policy_log_std.size)),  # per sample
         "values": batch.values.reshape(-1),
         "advantages": advantages.reshape(-1),
         "returns": returns.reshape(-1),
@@ -301,7 +308,7 @@ class Trainer:
         # how far θ moved from θ_old over the whole batch; eq. 8 adapts β from it
         dist = agent.distribution(agent.policy_output(data["obs"]))
         logp = dist.log_prob(data["actions"])
-        kl = float(np.mean(dist.kl(agent.distribution(data["policy_out"]))))
+        kl = float(np.mean(dist.kl(old_policy(agent, data))))
         if config.objective == "klpen" and config.adaptive_kl:
             self.kl_beta = losses.adaptive_beta(self.kl_beta, kl, config.kl_target)
         self.wall_s += time.perf_counter() - started

@@ -18,6 +18,7 @@ class Batch:
     actions: np.ndarray  # (T, N, act_dim) unclipped, or (T, N) integers
     logp: np.ndarray  # (T, N) log π_θold(a_t|s_t)
     policy_out: np.ndarray  # (T, N, ·) logits or means of π_θold
+    policy_log_std: np.ndarray  # (act_dim,) log σ of π_θold (continuous); (0,) for a categorical
     values: np.ndarray  # (T, N)
     next_values: np.ndarray  # (T, N)
     rewards: np.ndarray  # (T, N) scaled, as the learner sees them
@@ -109,7 +110,8 @@ class Rollout:
         # the statistics move only now, between batches (the stored obs keep the normalisation they were acted on)
         self.obs_normalizer.update(raw_obs[:T].reshape(T * N, obs_dim))
         scaled = self.reward_scaler.scale(rewards, terminated | truncated)
-        return Batch(obs, actions, logp, policy_out, values, next_values, scaled, terminated, truncated)
+        old_log_std = agent.log_std.copy()  # with the means, all of π_θold: eq. 8's KL compares against both
+        return Batch(obs, actions, logp, policy_out, old_log_std, values, next_values, scaled, terminated, truncated)
 
     def _check(self, observation: np.ndarray, t: int) -> np.ndarray:
         if not np.isfinite(observation).all():

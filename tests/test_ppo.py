@@ -26,12 +26,14 @@ def minibatch(agent, rng, n=9):
     else:
         actions = out + rng.standard_normal(out.shape)
         old_out = out + 0.1 * rng.standard_normal(out.shape)
-    old = agent.distribution(old_out)
+    old_log_std = agent.log_std + 0.2 * rng.standard_normal(agent.log_std.shape)  # π_θold's own σ, not the live one
+    old = agent.distribution(old_out, old_log_std)
     return {
         "obs": obs,
         "actions": actions,
         "logp": old.log_prob(actions),
         "policy_out": old_out,
+        "policy_log_std": np.tile(old_log_std, (n, 1)),
         "values": values + 0.05 * rng.standard_normal(n),
         "advantages": rng.standard_normal(n),
         "returns": values + rng.standard_normal(n),
