@@ -118,6 +118,14 @@ def complete_tasks(runs: list[dict], tasks, seeds) -> list[str]:
     return [env_id for env_id in tasks if all((s, env_id, seed) in done for s in settings for seed in seeds)]
 
 
+def complete_settings(runs: list[dict], tasks, seeds) -> list[str]:
+    """The settings that have a run for every task and seed: when a setting is being rerun (after a fix to the code
+    it trains), it is scored again only once all its runs are back; the others stay scored meanwhile."""
+    done = {(run["setting"], run["env"], int(run["seed"])) for run in runs}
+    settings = dict.fromkeys(run["setting"] for run in runs)
+    return [s for s in settings if all((s, env_id, seed) in done for env_id in tasks for seed in seeds)]
+
+
 def random_returns(rows: list[dict]) -> dict[str, float]:
     """{task: the random policy's mean return} from random.csv rows: the baselines Table 1 is scored with."""
     return {
@@ -128,8 +136,9 @@ def random_returns(rows: list[dict]) -> dict[str, float]:
 
 
 def write_table(runs_csv, random_csv, table_csv, tasks, seeds, steps) -> list[dict]:
-    """Score the recorded runs of ``tasks`` × ``seeds`` and (re)write table1.csv, in the paper's row order. Only
-    the tasks whose runs are all recorded count, and the table's ``scale`` names them."""
+    """Score the recorded runs of ``tasks`` × ``seeds`` and (re)write table1.csv, in the paper's row order. Only the
+    settings whose runs are all recorded count (or, while no setting is, the tasks whose runs are all recorded), and
+    the table's ``scale`` names the tasks."""
     randoms = random_returns(records.read_rows(random_csv))
     runs = [
         row
@@ -138,7 +147,11 @@ def write_table(runs_csv, random_csv, table_csv, tasks, seeds, steps) -> list[di
     ]
     if not runs:
         raise records.BenchmarkError(f"no runs recorded in {records.relative(runs_csv)} yet")
-    tasks = complete_tasks(runs, tasks, seeds)
+    settings = complete_settings(runs, tasks, seeds)
+    if settings:  # score the settings that have every run, on every task
+        runs = [row for row in runs if row["setting"] in settings]
+    else:  # a campaign in progress, task by task: score the tasks that have every run
+        tasks = complete_tasks(runs, tasks, seeds)
     if not tasks:
         raise records.BenchmarkError(f"no task has all its runs recorded in {records.relative(runs_csv)} yet")
     runs = [row for row in runs if row["env"] in tasks]
