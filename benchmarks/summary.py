@@ -154,6 +154,14 @@ def table1_verdict(table: list[dict]) -> str:
         clip_rank, none_rank = names.index(clip) + 1, names.index(none) + 1
         if len(names) < TABLE1_ROWS:
             verdict = f"is not settled: only {len(names)} of the {TABLE1_ROWS} settings are recorded."
+            if any("KL" not in name for name in names) and not any("KL" in name for name in names):
+                verdict = (
+                    f"is not settled: only {len(names)} of the {TABLE1_ROWS} settings are shown. The KL-penalty "
+                    "settings are being rerun after a fix to the penalty (it compared against the old policy's means "
+                    "but the current σ); their earlier runs are kept in `benchmarks/results/stale/` and not scored."
+                )
+            elif len(names) > 4:
+                verdict += " The rest of the KL-penalty settings are being rerun after a fix to the penalty."
         elif clip_rank == 1 and none_rank == len(names):
             verdict = "is reproduced."
         elif none_rank == len(names):
