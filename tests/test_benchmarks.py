@@ -641,3 +641,13 @@ def test_one_detail_table_puts_each_detail_between_all_on_and_all_off(tmp_path):
         "| Task | all on | grad_norm_clipping off | clip_value_loss off | scale_rewards off | all off |"
     )
     assert lines[2:] == ["| IP | 150 (2) | — | 950 (2) | — | 1000 (1) |"]  # only the tasks run one detail at a time
+
+
+def test_table1_names_the_settings_being_rerun():
+    table = [{"setting": "Clipping, ε = 0.2", "score": 0.8}, {"setting": "No clipping or penalty", "score": -0.4}]
+    pending = ["Fixed KL, β = 3", "Adaptive KL, d_targ = 0.01"]
+    text = summary.table1_verdict(table, pending)
+    assert "Not shown: 2 KL-penalty settings (Fixed KL, β = 3, Adaptive KL, d_targ = 0.01), being rerun" in text
+    assert "Not shown" not in summary.table1_verdict(table)
+    stale = summary.stale_settings("table1_1m_runs.csv", table)  # the committed stale record names all seven
+    assert stale == [name for name, _, _ in table1.SETTINGS if "KL" in name]
