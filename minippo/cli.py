@@ -145,6 +145,42 @@ def cmd_plot(args) -> int:
     return 0
 
 
+def cmd_sweep(args) -> int:
+    from minippo import sweep
+
+    if args.steps is None:
+        raise MinippoError("--steps is required")
+    if args.workers is not None and args.workers < 1:
+        raise MinippoError(f"--workers must be at least 1, not {args.workers}")
+    if args.retries < 0:
+        raise MinippoError(f"--retries must be 0 or more, not {args.retries}")
+    if len(set(args.env_ids)) != len(args.env_ids):
+        raise MinippoError("a task is named twice")
+    seeds, grid = sweep.parse_seeds(args.seeds), sweep.parse_grid(args.grid)
+    runs = sweep.plan(args.env_ids, seeds, args.steps, grid, args.objective, args.config)
+    from minippo.envs import make_env
+
+    for env_id in args.env_ids:  # an unknown id is refused before Ray starts
+        make_env(env_id).close()
+    job = sweep.Sweep(runs, args.out, args.csv, args.workers, args.address, args.retries, quiet=args.quiet)
+    try:
+        failed = job.run()
+    except KeyboardInterrupt:
+        print(
+            f"minippo: interrupted; {job.recorded} runs recorded in {job.csv_path}; the same command continues",
+            file=sys.stderr,
+        )
+        return 130
+    return 1 if failed else 0
+
+
+def sweep_file_words(line: str) -> list[str]:
+    """A line of a ``minippo sweep @FILE``: shell words, several to a line, # starts a comment."""
+    import shlex
+
+    return shlex.split(line, comments=True)
+
+
 def cmd_grade(args) -> int:
     from minippo.grade import grade
 
@@ -180,6 +216,26 @@ def build_parser() -> Parser:
     p.add_argument("--out", required=True)
     p.add_argument("--title")
     p.set_defaults(func=cmd_plot)
+
+    p = sub.add_parser(
+        "sweep",
+        help="train a grid of runs at once on Ray (this machine, or a cluster with --address)",
+        fromfile_prefix_chars="@",
+    )
+    p.convert_arg_line_to_args = sweep_file_words
+    p.add_argument("env_ids", nargs="+", metavar="ENV", help="one or more Gymnasium ids")
+    p.add_argument("--seeds", default="1", help="seeds: 1-3, 1,4,7 (default 1)")
+    p.add_argument("--steps", type=int)
+    p.add_argument("--grid", action="append", default=[], metavar="KEY=V1,V2", help="a Config field and its values")
+    p.add_argument("--objective", choices=["clip", "cpi", "klpen", "pg"], default="clip")
+    p.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE", help="override Config fields in every run")
+    p.add_argument("--out", required=True, help="the folder of run folders (and of sweep.csv)")
+    p.add_argument("--csv", help="the sweep's CSV (default OUT/sweep.csv)")
+    p.add_argument("--workers", type=int, help="runs at once (default: every core, or every CPU of the cluster)")
+    p.add_argument("--address", help="a running Ray cluster, HOST:PORT (default: $RAY_ADDRESS, else this machine)")
+    p.add_argument("--retries", type=int, default=0, help="tries again a failed run this many times")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_sweep)
 
     p = sub.add_parser("grade", help="grade your exercises, chapter by chapter")
     p.add_argument("chapter", nargs="?", help="a chapter number or name (default: all)")
