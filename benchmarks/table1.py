@@ -11,8 +11,11 @@ paper's MuJoCo defaults. Scoring as the paper's: per task, the random policy's m
 return of any run on that task is 1; a setting's score is the mean over its tasks and seeds. Each run's return is
 the mean of its last 100 episodes at the end of training.
 
-Runs are recorded in benchmarks/results/table1_runs.csv (one row per run, with its command), resumable and
-parallel-safe like the seven-task runner: start the script twice to run two trainings at once.
+Table 1 is a sweep on minippo sweep's engine: each run is what ``minippo train ENV --steps N --seed S --out
+benchmarks/runs/table1/<setting>-ENV-seedS --quiet <the setting's options>`` runs, as a Ray task of one CPU (one per
+core on this machine, or on a cluster with ``--address HOST:PORT``). Runs are recorded in
+benchmarks/results/table1_runs.csv (one row per run, with that command); recorded runs are skipped, so the same
+command resumes.
 """
 
 from __future__ import annotations
@@ -30,6 +33,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import random_policy  # noqa: E402
 import records  # noqa: E402
+
+from minippo.errors import MinippoError  # noqa: E402
 
 # (name, minippo train options, the paper's Table 1 score); the paper's numbers as quoted in ppo-facts.md
 SETTINGS = [
@@ -188,31 +193,54 @@ def write_table(runs_csv, random_csv, table_csv, tasks, seeds, steps) -> list[di
     return table
 
 
-def run_one(name, options, env_id, seed, steps, runs_csv, root, claims) -> str:
-    folder = Path(root) / f"{slug(name)}-{env_id}-seed{seed}"
-    with records.claim(folder.name, claims) as mine:
-        if not mine:
-            return "claimed by another runner"
-        if records.is_recorded(runs_csv, {"setting": name, "env": env_id, "seed": seed}):
-            return "already recorded"
-        commands = records.launch_or_resume(env_id, steps, seed, folder, options, claims)
-        if commands is None:
-            return "running outside this runner"
-        records.compact_progress(folder)
-        last = records.last_progress(folder)
-        row = {
-            "setting": name,
-            "env": env_id,
-            "seed": seed,
-            "steps": int(last["step"]),
-            "return_mean": round(float(last["return_mean"]), 2),
-            "wall_s": round(float(last["wall_s"]), 1),
-            "steps_per_s": round(float(last["steps_per_s"]), 1),
-            "commit": records.launch_commit(folder, claims),
-            "command": " && ".join(commands),
-        }
-        records.append_row(runs_csv, RUN_FIELDS, row, unique=("setting", "env", "seed"))
-        return f"recorded: return {row['return_mean']}"
+def setting_config(options: list[str]) -> tuple[str, dict]:
+    """A setting's ``minippo train`` options -> (objective, {Config field: value}), typed as the command line types
+    them: ['--objective', 'klpen', '--config', 'adaptive_kl=false', 'kl_beta=3'] -> ('klpen', {'adaptive_kl': False,
+    'kl_beta': 3.0})."""
+    from minippo.cli import parse_override
+    from minippo.sweep import config_fields
+
+    objective, overrides, words = "clip", {}, list(options)
+    while words:
+        word = words.pop(0)
+        if word == "--objective":
+            objective = words.pop(0)
+        elif word == "--config":
+            while words and not words[0].startswith("--"):
+                key, value = parse_override(words.pop(0), config_fields())
+                overrides[key] = value
+        else:
+            raise records.BenchmarkError(f"a setting's options are --objective and --config, not {word}")
+    return objective, overrides
+
+
+def sweep_runs(settings, envs, seeds, steps) -> list:
+    """The sweep: task by task (so that a partial table already covers whole tasks), then seed, then setting."""
+    from minippo.ppo import Config
+    from minippo.sweep import Run
+
+    runs = []
+    for env_id in envs:
+        for seed in seeds:
+            for name, options, _ in settings:
+                objective, overrides = setting_config(options)
+                config = Config(env_id=env_id, total_steps=steps, seed=seed, objective=objective, **overrides)
+                labels = {"setting": name, "env": env_id, "seed": seed}
+                runs.append(Run(f"{slug(name)}-{env_id}-seed{seed}", config.validate(), labels, list(options)))
+    return runs
+
+
+def record_row(run, row: dict) -> dict:
+    """The runs record's row of a finished run, from its row in the sweep's CSV."""
+    return {
+        **run.labels,
+        "steps": int(row["steps"]),
+        "return_mean": round(float(row["return_mean"]), 2),
+        "wall_s": round(float(row["wall_s"]), 1),
+        "steps_per_s": round(float(row["steps_per_s"]), 1),
+        "commit": row["commit"],
+        "command": row["command"],
+    }
 
 
 def main(argv=None) -> int:
@@ -229,6 +257,7 @@ def main(argv=None) -> int:
     parser.add_argument("--random-csv", default=str(random_policy.CSV_PATH))
     parser.add_argument("--table-csv", default=str(TABLE_CSV))
     parser.add_argument("--runs", default=str(RUN_ROOT), help="the folder of run folders")
+    records.add_sweep_options(parser)
     args = parser.parse_args(argv)
     if args.steps < 2048:
         records.fail(f"--steps must be at least one horizon (2048), not {args.steps}")
@@ -236,6 +265,7 @@ def main(argv=None) -> int:
     if any(not 1 <= number <= len(SETTINGS) for number in numbers):
         records.fail(f"--settings are row numbers of Table 1, from 1 to {len(SETTINGS)}")
     settings = [with_overrides(SETTINGS[number - 1], args.config) for number in numbers]
+    code = 0  # 1 when a training failed (it is logged in the runs folder's sweep.csv)
     try:
         if not args.score:
             missing = [
@@ -262,21 +292,17 @@ def main(argv=None) -> int:
                     check=True,
                     cwd=records.ROOT,
                 )
-            claims = Path(args.runs) / ".claims"
-            for env_id in args.envs:  # task by task, so that a partial table already covers whole tasks
-                for seed in args.seeds:
-                    for name, options, _ in settings:
-                        try:
-                            status = run_one(name, options, env_id, seed, args.steps, args.runs_csv, args.runs, claims)
-                        except records.BenchmarkError as error:
-                            status = f"failed: {error}"
-                        print(f"{name} / {env_id} seed {seed}: {status}", flush=True)
+            runs = sweep_runs(settings, args.envs, args.seeds, args.steps)
+            fields, key = RUN_FIELDS, ("setting", "env", "seed")
+            code = records.run_sweep(runs, args.runs, args.runs_csv, fields, key, record_row, args)
+            if code == 130:  # interrupted: the table waits for the next run of the command
+                return code
         table = write_table(args.runs_csv, args.random_csv, args.table_csv, args.envs, args.seeds, args.steps)
-    except (records.BenchmarkError, subprocess.CalledProcessError) as error:
+    except (records.BenchmarkError, subprocess.CalledProcessError, MinippoError) as error:
         records.fail(str(error))
     for row in table:
         print(f"{row['setting']:<30} {row['score']:>6.2f}   paper {row['paper_score']:>5.2f}   ({row['runs']} runs)")
-    return 0
+    return code
 
 
 if __name__ == "__main__":

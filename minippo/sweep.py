@@ -291,7 +291,10 @@ def one_line(error: BaseException) -> str:
 
 
 class Sweep:
-    """Runs ``runs`` on Ray and records them; ``run()`` returns the number of runs that failed."""
+    """Runs ``runs`` on Ray and records them; ``run()`` returns the number of runs that failed.
+
+    ``record``: a Record that also receives each finished run; ``after_write(folder)``: called once a finished run's
+    folder is written (the benchmarks round their progress.csv there)."""
 
     def __init__(
         self,
@@ -304,8 +307,10 @@ class Sweep:
         quiet=False,
         record=None,
         after_write=None,
+        command_out=None,
     ):
         self.runs, self.out = list(runs), Path(out)
+        self.command_out = command_out or self.out  # the folder as the commands in the CSV name it
         self.csv_path = Path(csv_path) if csv_path else self.out / "sweep.csv"
         self.label_fields = list(self.runs[0].labels) if self.runs else ["env", "seed"]
         self.fields = self.label_fields + RESULT_FIELDS
@@ -325,7 +330,7 @@ class Sweep:
     def finish(self, run: Run, result: dict | None, error: str, attempts: int) -> None:
         """Write a finished run's folder and its CSV row (rows of failures too)."""
         row = {**run.labels, "status": "failed", "error": error, "attempts": attempts, "commit": self.commit}
-        row["command"] = run.command(self.out)
+        row["command"] = run.command(self.command_out)
         if result is not None:
             folder = self.out / run.name
             write_run(folder, result, f"{run.config.env_id}, seed {run.config.seed}")

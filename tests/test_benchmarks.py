@@ -1,9 +1,8 @@
-"""The benchmark scripts' logic on small made-up records: Table 1's scoring, CSV appends and resumes, run claims,
-the speed table's ratios, and the summary. No training runs here: ``minippo train`` is replaced by a stub that
-writes what a finished training leaves behind."""
+"""The benchmark scripts' logic on small made-up records: Table 1's scoring, CSV appends, the runners' sweeps and
+their resumes, the speed table's ratios, and the summary. No training runs here: the sweep engine's Ray tasks are
+replaced by a stub that returns what a finished training leaves behind."""
 
 import csv
-import json
 import sys
 from pathlib import Path
 
@@ -168,7 +167,7 @@ def test_slug_makes_distinct_folder_names():
     assert table1.slug("Clipping, ε = 0.2") == "clipping-eps-0.2"
 
 
-# records: appends, claims, finished runs, resumes
+# records and the runners' sweeps
 
 
 def test_append_row_writes_header_once_and_skips_duplicates(tmp_path):
@@ -183,28 +182,6 @@ def test_append_row_writes_header_once_and_skips_duplicates(tmp_path):
         records.append_row(path, ["env", "other"], {"env": "A", "other": 1})
 
 
-def test_claim_is_exclusive_until_released(tmp_path):
-    with records.claim("run", tmp_path) as first:
-        assert first
-        with records.claim("run", tmp_path) as second:
-            assert not second
-        with records.claim("other", tmp_path) as third:
-            assert third
-    with records.claim("run", tmp_path) as again:
-        assert again
-
-
-def test_finished_needs_every_update_checkpointed(tmp_path):
-    fake_run(tmp_path / "done", 3, [1, 2, 3])
-    fake_run(tmp_path / "half", 2, [1, 2])
-    fake_run(tmp_path / "unsaved", 3, [1, 2, 3], checkpoint_update=2)
-    assert records.finished(tmp_path / "done", 3 * 2048)
-    assert records.finished(tmp_path / "done", 3 * 2048 + 100)  # the last partial batch is never run
-    assert not records.finished(tmp_path / "half", 3 * 2048)
-    assert not records.finished(tmp_path / "unsaved", 3 * 2048)
-    assert not records.finished(tmp_path / "missing", 3 * 2048)
-
-
 def test_compact_progress_rounds_floats_and_keeps_integers(tmp_path):
     fake_run(tmp_path / "run", 2, [1.23456789012, float("nan")])
     records.compact_progress(tmp_path / "run")
@@ -215,89 +192,78 @@ def test_compact_progress_rounds_floats_and_keeps_integers(tmp_path):
 
 
 @pytest.fixture
-def stub_training(monkeypatch):
-    """Replace the subprocess with a stub that finishes (or resumes) the run in the --out folder."""
-    calls = []
+def stub_engine(monkeypatch, tmp_path):
+    """Replace the engine's Ray tasks with a stub that hands back what a finished two-update training returns."""
+    from minippo import sweep
 
-    def fake(argv, log, on_start=None):
-        calls.append(argv)
-        out = Path(argv[argv.index("--out") + 1])
-        if not out.is_absolute():
-            out = records.ROOT / out
-        if on_start:
-            on_start(999_999_999)  # a pid that is not alive
-        fake_run(out, 2, [10.0, 20.0])
+    done = []
+    fake_run(tmp_path / "made", 2, [10.0, 20.0])
+    files = {path.name: path.read_bytes() for path in (tmp_path / "made").iterdir()}
+    last = {"step": 4096, "return_mean": 20.0, "wall_s": 2.04, "steps_per_s": 2000.04}
 
-    monkeypatch.setattr(records, "run_training", fake)
-    return calls
+    def execute(runs, on_result, workers=None, address=None, retries=0, progress=None):
+        for run in runs:
+            done.append(run)
+            on_result(run, {"files": files, "last": last, "node": "n1", "host": "h"}, "", 1)
+
+    monkeypatch.setattr(sweep, "execute", execute)
+    return done
 
 
-def test_runner_records_runs_and_skips_recorded_ones(tmp_path, stub_training):
+def test_seven_tasks_records_runs_and_skips_recorded_ones(tmp_path, stub_engine):
     csv_path, runs = tmp_path / "mujoco.csv", tmp_path / "runs"
-    args = [
-        "--envs",
-        "Hopper-v5",
-        "Swimmer-v5",
-        "--seeds",
-        "1",
-        "2",
-        "--steps",
-        "4096",
-        "--csv",
-        str(csv_path),
-        "--runs",
-        str(runs),
-    ]
+    args = ["--envs", "Hopper-v5", "Swimmer-v5", "--seeds", "1", "2", "--steps", "4096"]
+    args += ["--csv", str(csv_path), "--runs", str(runs), "--quiet"]
     assert seven_tasks.main(args) == 0
     rows = records.read_rows(csv_path)
+    assert list(rows[0]) == seven_tasks.FIELDS
     assert [(row["env"], row["seed"]) for row in rows] == [
         ("Hopper-v5", "1"),
         ("Hopper-v5", "2"),
         ("Swimmer-v5", "1"),
         ("Swimmer-v5", "2"),
     ]
-    assert rows[0]["return_mean"] == "20.0" and rows[0]["steps"] == "4096"
-    assert rows[0]["command"].endswith(
-        f"minippo train Hopper-v5 --steps 4096 --seed 1 --out {runs}/Hopper-v5-seed1 --quiet"
-    )
-    assert len(stub_training) == 4
+    assert rows[0]["return_mean"] == "20.0" and rows[0]["steps"] == "4096" and rows[0]["wall_s"] == "2.0"
+    assert rows[0]["command"] == f"minippo train Hopper-v5 --steps 4096 --seed 1 --out {runs}/Hopper-v5-seed1 --quiet"
+    assert rows[0]["commit"] == records.git_commit()
+    assert [run.config.seed for run in stub_engine] == [1, 2, 1, 2]
+    assert (runs / "Hopper-v5-seed1" / "curve.png").exists()
+    sweep_rows = records.read_rows(runs / "sweep.csv")  # the engine's own log says where each run ran
+    assert [(row["status"], row["node"]) for row in sweep_rows] == [("ok", "n1")] * 4
     assert seven_tasks.main(args) == 0  # everything recorded: nothing runs again
-    assert len(stub_training) == 4 and len(records.read_rows(csv_path)) == 4
+    assert len(stub_engine) == 4 and len(records.read_rows(csv_path)) == 4
 
 
-def test_runner_resumes_a_folder_with_a_checkpoint_and_keeps_both_commands(tmp_path, stub_training):
-    runs, claims = tmp_path / "runs", tmp_path / "runs" / ".claims"
-    fake_run(runs / "Hopper-v5-seed1", 1, [5.0])  # stopped after one update
-    claims.mkdir(parents=True)
-    (claims / "Hopper-v5-seed1.json").write_text(json.dumps({"commands": ["first command"], "commit": "abc1234"}))
-    status = seven_tasks.run_one("Hopper-v5", 1, 4096, tmp_path / "m.csv", runs, claims)
-    assert status.startswith("recorded")
-    assert "--resume" in stub_training[0] and "--force" not in stub_training[0]
-    row = records.read_rows(tmp_path / "m.csv")[0]
-    assert row["command"].startswith("first command && ") and "--resume" in row["command"]
-    assert row["commit"] == "abc1234"
+def test_runners_skip_what_the_records_hold(tmp_path, stub_engine):
+    csv_path = tmp_path / "mujoco.csv"
+    write_csv(csv_path, [dict.fromkeys(seven_tasks.FIELDS, "x") | {"env": "Hopper-v5", "seed": "2"}])
+    args = ["--envs", "Hopper-v5", "--seeds", "1", "2", "--steps", "4096", "--csv", str(csv_path)]
+    assert seven_tasks.main([*args, "--runs", str(tmp_path / "runs"), "--quiet"]) == 0
+    assert [run.config.seed for run in stub_engine] == [1]
 
 
-def test_runner_restarts_a_folder_without_checkpoint(tmp_path, stub_training):
-    runs = tmp_path / "runs"
-    (runs / "Hopper-v5-seed1").mkdir(parents=True)
-    (runs / "Hopper-v5-seed1" / "config.json").write_text("{}")
-    seven_tasks.run_one("Hopper-v5", 1, 4096, tmp_path / "m.csv", runs, runs / ".claims")
-    assert "--force" in stub_training[0] and "--resume" not in stub_training[0]
-
-
-def test_runner_skips_a_claimed_run(tmp_path, stub_training):
-    runs = tmp_path / "runs"
-    with records.claim("Hopper-v5-seed1", runs / ".claims"):
-        status = seven_tasks.run_one("Hopper-v5", 1, 4096, tmp_path / "m.csv", runs, runs / ".claims")
-    assert status == "claimed by another runner" and not stub_training
-
-
-def test_runner_refuses_bad_input(capsys):
-    with pytest.raises(SystemExit) as stop:
-        seven_tasks.main(["--envs", "Hoper-v5"])
-    assert stop.value.code == 2
-    assert "unknown task Hoper-v5" in capsys.readouterr().err
+def test_table1_sweep_makes_the_commands_of_its_records():
+    """The runs the sweep describes are the trainings whose commands the 1M-step Table 1 records hold (the KL rows
+    among the stale ones being rerun), which the earlier runner started with one BLAS thread set in the environment,
+    which minippo sets itself."""
+    recorded = {
+        (row["setting"], row["env"], row["seed"]): row["command"]
+        for path in (records.RESULTS / "table1_1m_runs.csv", records.RESULTS / "stale" / "table1_1m_runs.csv")
+        for row in records.read_rows(path)
+    }
+    runs = table1.sweep_runs(table1.SETTINGS, ["HalfCheetah-v5", "Hopper-v5"], [1, 2], 1_000_000)
+    assert len(runs) == 11 * 2 * 2 and runs[0].labels == {
+        "setting": table1.SETTINGS[0][0],
+        "env": "HalfCheetah-v5",
+        "seed": 1,
+    }
+    for run in runs:
+        command = recorded[tuple(str(v) for v in run.labels.values())]
+        assert command.split("minippo ", 1)[1] == run.command("benchmarks/runs/table1_1m").split("minippo ", 1)[1]
+    fixed = next(run for run in runs if run.labels["setting"] == "Fixed KL, β = 3")
+    assert (fixed.config.objective, fixed.config.adaptive_kl, fixed.config.kl_beta) == ("klpen", False, 3.0)
+    with pytest.raises(records.BenchmarkError, match="--objective and --config"):
+        table1.setting_config(["--steps", "5"])
 
 
 def test_table1_overrides_join_each_settings_config():
