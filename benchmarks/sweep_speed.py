@@ -1,0 +1,126 @@
+"""What ``minippo sweep`` saves: the same small grid trained one run after the other, then on the sweep engine with
+two workers, wall time side by side.
+
+    python benchmarks/sweep_speed.py                        # Hopper-v5, clip_epsilon 0.1 and 0.2, seeds 1-2
+    python benchmarks/sweep_speed.py --steps 204800 --workers 2
+
+One after the other is what a user without the engine would type: each run's ``minippo train`` command (run in this
+process, so no interpreter start-up is counted), every run with one math thread. The sweep is ``minippo sweep`` with
+the same runs and ``--workers 2``, timed from the start of Ray to its stop, so the engine's start-up is in its time.
+Both write the same run folders; the script checks that every run's progress.csv is the same on both sides apart
+from the clock columns, and writes one row to benchmarks/results/sweep_speed.csv: both wall times, their ratio, the
+trainings' own clocks summed, the load average before and after, the commit and the command.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import shlex
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import records  # noqa: E402
+
+from minippo.errors import MinippoError  # noqa: E402
+
+CSV_PATH = records.RESULTS / "sweep_speed.csv"
+FIELDS = [
+    "env",
+    "grid",
+    "runs",
+    "steps",
+    "workers",
+    "cpus",
+    "sequential_s",
+    "sweep_s",
+    "speedup",
+    "sequential_train_s",
+    "sweep_train_s",
+    "same_progress",
+    "load_before",
+    "load_after",
+    "commit",
+    "command",
+]
+TIMING = {"steps_per_s", "wall_s"}
+
+
+def progress(folder) -> list[dict]:
+    with open(Path(folder) / "progress.csv", newline="") as handle:
+        return [{k: v for k, v in row.items() if k not in TIMING} for row in csv.DictReader(handle)]
+
+
+def last_wall(folder) -> float:
+    with open(Path(folder) / "progress.csv", newline="") as handle:
+        return float(list(csv.DictReader(handle))[-1]["wall_s"])
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--env", default="Hopper-v5")
+    parser.add_argument("--grid", default="clip_epsilon=0.1,0.2", help="KEY=V1,V2 as minippo sweep takes it")
+    parser.add_argument("--seeds", default="1-2")
+    parser.add_argument("--steps", type=int, default=102400)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--csv", default=str(CSV_PATH))
+    args = parser.parse_args(argv)
+    from minippo import sweep
+    from minippo.cli import main as minippo
+
+    try:
+        runs = sweep.plan([args.env], sweep.parse_seeds(args.seeds), args.steps, sweep.parse_grid([args.grid]))
+    except MinippoError as error:
+        records.fail(str(error))
+    if args.workers < 1 or args.steps < 2048:
+        records.fail("--workers must be at least 1 and --steps at least one horizon (2048)")
+    load_before = os.getloadavg()[0]
+    with tempfile.TemporaryDirectory(prefix="sweep-speed-") as scratch:
+        alone, swept = Path(scratch) / "alone", Path(scratch) / "swept"
+        started = time.perf_counter()
+        for run in runs:
+            argv_run = shlex.split(run.command(alone))[1:]
+            if minippo(argv_run) != 0:
+                records.fail(f"'{run.command(alone)}' failed")
+        sequential = time.perf_counter() - started
+        started = time.perf_counter()
+        failed = sweep.Sweep(runs, swept, workers=args.workers, quiet=True).run()
+        swept_s = time.perf_counter() - started
+        if failed:
+            records.fail(f"{failed} runs of the sweep failed; see {swept / 'sweep.csv'}")
+        same = all(progress(alone / run.name) == progress(swept / run.name) for run in runs)
+        train_alone = sum(last_wall(alone / run.name) for run in runs)
+        train_swept = sum(last_wall(swept / run.name) for run in runs)
+    row = {
+        "env": args.env,
+        "grid": args.grid,
+        "runs": len(runs),
+        "steps": runs[0].config.num_updates * runs[0].config.batch_size,
+        "workers": args.workers,
+        "cpus": os.cpu_count(),
+        "sequential_s": round(sequential, 1),
+        "sweep_s": round(swept_s, 1),
+        "speedup": round(sequential / swept_s, 2),
+        "sequential_train_s": round(train_alone, 1),
+        "sweep_train_s": round(train_swept, 1),
+        "same_progress": "yes" if same else "no",
+        "load_before": round(load_before, 2),
+        "load_after": round(os.getloadavg()[0], 2),
+        "commit": records.git_commit(),
+        "command": "python benchmarks/sweep_speed.py " + records.shell_text(sys.argv[1:] if argv is None else argv),
+    }
+    records.append_row(args.csv, FIELDS, row)
+    print(
+        f"{len(runs)} runs of {args.env}: one after the other {row['sequential_s']} s, on the sweep engine with "
+        f"{args.workers} workers {row['sweep_s']} s ({row['speedup']}x); the same progress: {row['same_progress']}"
+    )
+    return 0 if same else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
