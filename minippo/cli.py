@@ -220,12 +220,14 @@ def build_parser() -> Parser:
     p = sub.add_parser(
         "sweep",
         help="train a grid of runs at once on Ray (this machine, or a cluster with --address)",
+        description="Every task x seed x combination of --grid values, each run what minippo train runs alone. "
+        "minippo sweep @FILE reads the arguments from a file (shell words, # for comments).",
         fromfile_prefix_chars="@",
     )
     p.convert_arg_line_to_args = sweep_file_words
     p.add_argument("env_ids", nargs="+", metavar="ENV", help="one or more Gymnasium ids")
     p.add_argument("--seeds", default="1", help="seeds: 1-3, 1,4,7 (default 1)")
-    p.add_argument("--steps", type=int)
+    p.add_argument("--steps", type=int, help="environment steps per run (required)")
     p.add_argument("--grid", action="append", default=[], metavar="KEY=V1,V2", help="a Config field and its values")
     p.add_argument("--objective", choices=["clip", "cpi", "klpen", "pg"], default="clip")
     p.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE", help="override Config fields in every run")

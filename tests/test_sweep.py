@@ -88,6 +88,18 @@ def test_seeds_grid_and_plan():
     assert [run.config.env_id for run in runs[-4:]] == ["Acrobot-v1"] * 4
 
 
+def test_a_sweep_file_holds_the_arguments(tmp_path):
+    from minippo.cli import build_parser
+
+    (tmp_path / "eps.sweep").write_text(
+        "# clipping on two tasks\nCartPole-v1 Acrobot-v1\n--seeds 1-3 --steps 4096  # short\n"
+        "--grid clip_epsilon=0.1,0.2\n--out 'runs/eps sweep'\n"
+    )
+    args = build_parser().parse_args(["sweep", f"@{tmp_path / 'eps.sweep'}", "--workers", "2"])
+    assert args.env_ids == ["CartPole-v1", "Acrobot-v1"] and args.seeds == "1-3" and args.steps == 4096
+    assert args.grid == ["clip_epsilon=0.1,0.2"] and args.out == "runs/eps sweep" and args.workers == 2
+
+
 @pytest.mark.parametrize(
     "words, message",
     [
