@@ -79,7 +79,7 @@ def main(argv=None) -> int:
         records.fail(str(error))
     if args.workers < 1 or args.steps < 2048:
         records.fail("--workers must be at least 1 and --steps at least one horizon (2048)")
-    load_before = os.getloadavg()[0]
+    load_before, commit = os.getloadavg()[0], records.git_commit()  # the code as it starts
     with tempfile.TemporaryDirectory(prefix="sweep-speed-") as scratch:
         alone, swept = Path(scratch) / "alone", Path(scratch) / "swept"
         started = time.perf_counter()
@@ -111,7 +111,7 @@ def main(argv=None) -> int:
         "same_progress": "yes" if same else "no",
         "load_before": round(load_before, 2),
         "load_after": round(os.getloadavg()[0], 2),
-        "commit": records.git_commit(),
+        "commit": commit,
         "command": "python benchmarks/sweep_speed.py " + records.shell_text(sys.argv[1:] if argv is None else argv),
     }
     records.append_row(args.csv, FIELDS, row)

@@ -208,11 +208,13 @@ def test_ctrl_c_keeps_finished_runs_and_the_same_command_resumes(tmp_path):
         while not (out / "sweep.csv").exists() and time.monotonic() < deadline and first.poll() is None:
             time.sleep(0.2)
         assert (out / "sweep.csv").exists(), "no run finished"
+        listening = listening_addresses(session_processes(first.pid))  # the local Ray: driver, raylet, workers
         os.killpg(first.pid, signal.SIGINT)  # Ctrl-C reaches the terminal's whole process group
         _, stderr = first.communicate(timeout=60)
     finally:
         stop_session(first)
     assert first.returncode == 130, stderr
+    assert listening and listening <= LOOPBACK, listening
     assert "interrupted;" in stderr and "the same command continues" in stderr
     kept = rows_of(out / "sweep.csv")
     assert 1 <= len(kept) < 4 and {row["status"] for row in kept} == {"ok"}
@@ -228,6 +230,9 @@ def test_ctrl_c_keeps_finished_runs_and_the_same_command_resumes(tmp_path):
 
 
 # a two-node cluster on this machine
+
+
+LOOPBACK = {"127.0.0.1", "::1", "::ffff:127.0.0.1"}
 
 
 def free_port() -> int:
@@ -335,4 +340,4 @@ def test_a_sweep_runs_on_both_nodes_of_a_two_node_cluster(two_nodes, tmp_path):
 
     pids = [pid for process in processes for pid in session_processes(process.pid)]
     addresses = listening_addresses(pids)
-    assert addresses and addresses <= {"127.0.0.1", "::1", "::ffff:127.0.0.1"}, addresses
+    assert addresses and addresses <= LOOPBACK, addresses
