@@ -322,7 +322,20 @@ class Sweep:
         self.recorded = 0
 
     def todo(self) -> list[Run]:
-        done = {tuple(row[k] for k in self.label_fields) for row in read_rows(self.csv_path) if row["status"] == "ok"}
+        """The runs without an ok row. A row for the same labels but another command (other steps, other fixed
+        settings) means the CSV holds another sweep: refused, rather than skipped or mixed in."""
+        done = {}
+        for row in read_rows(self.csv_path):
+            if row["status"] == "ok":
+                done[tuple(row[k] for k in self.label_fields)] = row["command"]
+        for run in self.runs:
+            made_by = done.get(run.key())
+            if made_by is not None and made_by != run.command(self.command_out):
+                raise MinippoError(
+                    f"{self.csv_path} holds {run.name} made by '{made_by}', not by '{run.command(self.command_out)}';"
+                    " give this sweep another --out or --csv"
+                )
+        done = set(done)
         if self.record is not None:
             done |= {tuple(row[k] for k in self.record.key) for row in read_rows(self.record.path)}
         return [run for run in self.runs if run.key() not in done]

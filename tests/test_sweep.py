@@ -130,6 +130,25 @@ def test_missing_ray_is_one_line(monkeypatch):
         sweep.start_ray(None, None)
 
 
+def test_a_csv_of_another_sweep_is_refused(tmp_path, monkeypatch, capsys):
+    """Resuming skips the runs with an ok row, but only when the row's command is this run's (Ray's tasks are
+    replaced here by the same training in this process)."""
+
+    def in_process(runs, on_result, *args, **kwargs):
+        for run in runs:
+            on_result(run, sweep.train_run(run.config.to_dict(), run.name), "", 1)
+
+    monkeypatch.setattr(sweep, "execute", in_process)
+    words = ["sweep", "CartPole-v1", "--steps", "2048", "--out", str(tmp_path / "s"), "--quiet"]
+    assert main(words) == 0 and main(words) == 0  # the second time, nothing to do
+    assert "all 1 runs are recorded" in capsys.readouterr().err
+    assert len(rows_of(tmp_path / "s" / "sweep.csv")) == 1
+    assert main([*words, "--config", "lr=0.001"]) == 2
+    error = capsys.readouterr().err
+    assert "holds CartPole-v1-seed1 made by 'minippo train CartPole-v1 --steps 2048" in error
+    assert "give this sweep another --out or --csv" in error and error.count("\n") == 1
+
+
 # on a local Ray instance
 
 
