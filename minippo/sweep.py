@@ -11,20 +11,24 @@ trains in a scratch folder on whatever machine Ray puts it and returns the files
 policy.npz, and curve.png drawn as ``minippo train`` draws it) and appends one row to the sweep's CSV
 (``--out/sweep.csv`` unless ``--csv``): the run's task, seed and grid values, its steps and final return (mean of the
 last 100 episodes), its clock, its status and one-line error, the attempts it took, the Ray node and host it ran on,
-the commit of the code and the ``minippo train`` command that makes the same run alone. No file is shared between
-machines: only the driver reads and writes the folder.
+the commit of the driver's code and the ``minippo train`` command that makes the same run alone. No file is shared
+between machines: only the driver reads and writes the folder. A progress bar counts the runs and shows the running
+ones' progress and current return.
 
 Where it runs: without ``--address`` (or ``RAY_ADDRESS``), a Ray instance on this machine, started for the sweep and
 stopped after it, with one worker per core (``--workers N`` for fewer), listening on the loopback address only. With
 ``--address HOST:PORT``, a Ray cluster already running there (``ray start --head`` on one machine, ``ray start
 --address HOST:PORT`` on the others, minippo installed on each); ``--workers N`` then caps the runs in flight.
 
-Safe to stop and start again: a run with an ``ok`` row in the CSV is skipped, so the same command resumes a sweep.
+Safe to stop and start again: a run with an ``ok`` row in the CSV is skipped, so the same command resumes a sweep (a
+row of the same run made by another command, with other steps or settings, is refused: another sweep's CSV).
 A run that fails (an exception, or NaN/inf in the loss: ``NonFiniteError``) is tried again up to ``--retries`` more
 times, then recorded with status ``failed`` and its reason, and the sweep goes on; a later invocation tries it again.
 Ctrl-C records the runs already finished, stops the workers, and exits with 130.
 
-Ray is an optional dependency (``pip install -e ".[sweep]"``); nothing else in minippo imports it.
+Ray is an optional dependency (``pip install -e ".[sweep]"``); nothing else in minippo imports it. The benchmark
+runners (benchmarks/seven_tasks.py, benchmarks/table1.py) build their runs as ``Run`` and hand them to ``Sweep`` with
+a ``Record``, the CSV of their own columns.
 """
 
 from __future__ import annotations
