@@ -402,10 +402,23 @@ class Sweep:
 # the engine: Ray tasks, retries, Ctrl-C
 
 
+def reachable(address: str) -> None:
+    """Refuse at once an address where nothing listens (Ray itself would retry for minutes)."""
+    host, _, port = address.rpartition(":")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=5).close()
+    except ValueError:
+        raise MinippoError(f"--address takes HOST:PORT, not '{address}'") from None
+    except OSError as error:
+        raise MinippoError(f"no Ray cluster answers at {address} ({error.strerror or error})") from None
+
+
 def start_ray(workers: int | None, address: str | None):
     """Import Ray and connect: to ``address``, or to a new Ray instance on this machine. Returns (ray, whether we
     started it)."""
     host = address.rsplit(":", 1)[0].strip("[]") if address else None
+    if address is not None and "://" not in address and address != "auto":
+        reachable(address)
     if address is None or host in LOOPBACK:
         # a Ray on this machine listens on the loopback address only (Ray's switch for single-machine use)
         os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")

@@ -109,6 +109,8 @@ def test_a_sweep_file_holds_the_arguments(tmp_path):
         (["--grid", "lr=fast"], "cannot read 'fast' as float"),
         (["--grid", "seed=1,2"], "give the tasks, --seeds and --steps instead"),
         (["--workers", "0"], "--workers must be at least 1"),
+        (["--address", "127.0.0.1:1"], "no Ray cluster answers at 127.0.0.1:1"),
+        (["--address", "cluster"], "--address takes HOST:PORT, not 'cluster'"),
     ],
 )
 def test_bad_input_gets_one_line(words, message, capsys, tmp_path):
