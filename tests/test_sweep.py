@@ -241,9 +241,13 @@ def test_ctrl_c_keeps_finished_runs_and_the_same_command_resumes(tmp_path):
     assert 1 <= len(kept) < 4 and {row["status"] for row in kept} == {"ok"}
     stamps = {row["seed"]: (out / f"CartPole-v1-seed{row['seed']}" / "progress.csv").stat().st_mtime_ns for row in kept}
 
-    again = subprocess.run(argv, cwd=tmp_path, capture_output=True, text=True, timeout=120)
-    assert again.returncode == 0, again.stderr
-    assert f"{len(kept)} already recorded" in again.stderr
+    again = subprocess.Popen(argv, cwd=tmp_path, start_new_session=True, stderr=subprocess.PIPE, text=True)
+    try:
+        _, stderr = again.communicate(timeout=120)
+    finally:
+        stop_session(again)  # whatever happened, no Ray process of this test outlives it
+    assert again.returncode == 0, stderr
+    assert f"{len(kept)} already recorded" in stderr
     rows = rows_of(out / "sweep.csv")
     assert sorted(row["seed"] for row in rows) == ["1", "2", "3", "4"]  # each run once: nothing trained twice
     for seed, stamp in stamps.items():  # the runs recorded before the stop were not run again
