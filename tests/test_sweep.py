@@ -232,9 +232,14 @@ def test_ctrl_c_keeps_finished_runs_and_the_same_command_resumes(tmp_path):
         listening = listening_addresses(session_processes(first.pid))  # the local Ray: driver, raylet, workers
         os.killpg(first.pid, signal.SIGINT)  # Ctrl-C reaches the terminal's whole process group
         _, stderr = first.communicate(timeout=60)
+        deadline = time.monotonic() + 20
+        while session_processes(first.pid) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        left = session_processes(first.pid)  # the workers, and the local Ray with them, have stopped
     finally:
         stop_session(first)
     assert first.returncode == 130, stderr
+    assert not left, [Path(f"/proc/{pid}/cmdline").read_bytes()[:100] for pid in left]
     assert listening and listening <= LOOPBACK, listening
     assert "interrupted;" in stderr and "the same command continues" in stderr
     kept = rows_of(out / "sweep.csv")
