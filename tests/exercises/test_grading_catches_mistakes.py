@@ -24,11 +24,15 @@ pytestmark = pytest.mark.skipif(
 WRONG = _harness.ROOT / "tests" / "exercises" / "wrong"
 
 
-def variants_of(chapter: str) -> dict:
+def wrong_module(chapter: str):
     spec = importlib.util.spec_from_file_location(f"_variants_{chapter}", WRONG / f"{chapter}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    return module.VARIANTS
+    return module
+
+
+def variants_of(chapter: str) -> dict:
+    return wrong_module(chapter).VARIANTS
 
 
 def exercises_by_chapter() -> dict[str, list[str]]:
@@ -122,3 +126,11 @@ def test_every_wrong_variant_fails_at_least_one_grading_test():
     assert set(outcomes) == expected, f"variants that did not run: {sorted(expected - set(outcomes))}"
     accepted = [variant for variant, rs in outcomes.items() if not any(r.outcome == "failed" for r in rs)]
     assert not accepted, f"wrong variants that pass every grading test: {accepted}"
+    # the first failure, the one the scoreboard shows, names the mistake where the variant says what it must say
+    unnamed = []
+    for (chapter, variant), rs in sorted(outcomes.items()):
+        pattern = getattr(wrong_module(chapter), "FIRST_FAILURE", {}).get(variant)
+        first = next(r for r in rs if r.outcome == "failed")
+        if pattern and not re.search(pattern, first.message):
+            unnamed.append(f"{chapter}:{variant}: {first.message!r} does not match {pattern!r}")
+    assert not unnamed, "first failures that do not name the mistake:\n" + "\n".join(unnamed)
