@@ -326,12 +326,13 @@ def _pattern(actual: np.ndarray, expected: np.ndarray) -> str:
     """A hint when the whole result is off by one factor: the sign, n (a sum for a mean), 2 or ½."""
     if actual.size < 2:
         return ""
-    scale = np.abs(expected) > 1e-12
-    if scale.sum() < 2 or not np.all(np.abs(actual[~scale]) < 1e-9):
+    top = float(np.max(np.abs(expected)))
+    scale = np.abs(expected) > 1e-4 * top
+    if top == 0 or scale.sum() < 2 or not np.all(np.abs(actual[~scale]) < 1e-3 * top):
         return ""
     factors = actual[scale] / expected[scale]
     factor = float(np.median(factors))
-    if not np.allclose(factors, factor, rtol=1e-6) or abs(factor - 1) < 1e-9:
+    if not np.allclose(factors, factor, rtol=1e-4) or abs(factor - 1) < 1e-6:
         return ""
     for value, words in [
         (-1.0, "the sign is flipped everywhere"),
@@ -340,7 +341,7 @@ def _pattern(actual: np.ndarray, expected: np.ndarray) -> str:
         (2.0, "twice the expected everywhere: a factor ½ or 2?"),
         (0.5, "half the expected everywhere: a factor ½ or 2?"),
     ]:
-        if abs(factor - value) < 1e-6 * abs(value):
+        if abs(factor - value) < 1e-4 * abs(value):
             return f" ({words})"
     return f" (got = {factor:.4g} × expected everywhere: one constant factor off)"
 
