@@ -325,6 +325,16 @@ def check_close(actual, expected, name: str, what: str, rtol: float = 1e-6, atol
 def _pattern(actual: np.ndarray, expected: np.ndarray) -> str:
     """A hint when the whole result is off by one factor: the sign, n (a sum for a mean), 2 or ½."""
     if actual.size < 2:
+        got, want = float(actual.reshape(-1)[0]), float(expected.reshape(-1)[0])
+        if want == 0 or not np.isfinite(got):
+            return ""
+        factor = got / want
+        if abs(factor + 1) < 1e-6:
+            return " (the opposite sign)"
+        if abs(factor - 2) < 1e-6 or abs(factor - 0.5) < 1e-6:
+            return f" ({'twice' if factor > 1 else 'half'} the expected: a factor ½ or 2?)"
+        if factor > 1.5 and abs(factor - round(factor)) < 1e-6:
+            return f" ({round(factor)} times the expected: a sum over the batch where the mean belongs?)"
         return ""
     top = float(np.max(np.abs(expected)))
     scale = np.abs(expected) > 1e-4 * top

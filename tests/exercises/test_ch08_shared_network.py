@@ -36,26 +36,34 @@ def reference_clipped_value_loss(values, targets, values_old, epsilon):
 def value_batch(rng):
     # V moved by 0.05 … 0.9 from V_old, in both directions; ε = 0.2 with no sample near the edges of the band
     values_old = rng.normal(size=12)
-    moves = np.array([0.05, -0.1, 0.15, -0.05, 0.5, -0.6, 0.9, -0.3, 0.35, -0.45, 0.12, -0.7])
+    moves = np.array([0.05, -0.1, 0.15, -0.05, 0.5, -0.6, 0.9, -0.3, 0.35, -0.45, 0.12, -0.7])  # clear of ±0.2, ±0.4
     targets = values_old + rng.normal(0, 0.6, 12)
     return values_old + moves, targets, values_old
 
 
-def test_clipped_value_loss_value_and_gradient(student, value_batch):
+@pytest.mark.parametrize("epsilon", [0.2, 0.4])
+def test_clipped_value_loss_value_and_gradient(student, value_batch, epsilon):
     values, targets, values_old = value_batch
     loss, grad = call_checking_inputs(
-        student.clipped_value_loss, "clipped_value_loss", values, targets, values_old, 0.2
+        student.clipped_value_loss, "clipped_value_loss", values, targets, values_old, epsilon
     )
-    expected = reference_clipped_value_loss(values, targets, values_old, 0.2)
+    expected = reference_clipped_value_loss(values, targets, values_old, epsilon)
     check_close(
         check_scalar(loss, "clipped_value_loss"),
         expected,
         "clipped_value_loss",
-        "the loss ½ Ê[max((V − V^targ)², (V^clip − V^targ)²)]",
+        f"the loss ½ Ê[max((V − V^targ)², (V^clip − V^targ)²)], ε = {epsilon}",
     )
     check_array(grad, "clipped_value_loss", (12,), "the gradient")
-    numeric = numerical_gradient(lambda: reference_clipped_value_loss(values, targets, values_old, 0.2), values)
-    check_close(grad, numeric, "clipped_value_loss", "∂L/∂V (checked by finite differences)")
+    numeric = numerical_gradient(lambda: reference_clipped_value_loss(values, targets, values_old, epsilon), values)
+    moves = values - values_old
+    check_close(
+        grad,
+        numeric,
+        "clipped_value_loss",
+        f"∂L/∂V (checked by finite differences), ε = {epsilon}",
+        where=lambda i: f"V − V_old = {moves[i]:.3g}, V − V^targ = {values[i] - targets[i]:.3g}",
+    )
 
 
 def test_clipped_value_loss_is_never_below_the_plain_loss(student, value_batch):
@@ -91,7 +99,7 @@ def reference_objective(logp, logp_old, advantages, values, targets, entropy, ep
 def objective_batch(rng):
     n = 9
     logp_old = rng.normal(-1.2, 0.4, n)
-    ratios = np.array([0.5, 0.7, 0.9, 1.0, 1.1, 1.3, 1.6, 0.95, 1.05])
+    ratios = np.array([0.5, 0.7, 0.9, 1.0, 1.1, 1.3, 1.6, 1.21, 0.81])  # 1.21 and 0.81: between 1 ± ε and e^±ε
     return (
         np.log(ratios) + logp_old,
         logp_old,
@@ -102,10 +110,10 @@ def objective_batch(rng):
     )
 
 
-@pytest.mark.parametrize("c1, c2", [(0.5, 0.01), (1.0, 0.0), (2.0, 0.5)])
-def test_clip_vf_s_objective_value_and_gradients(student, objective_batch, c1, c2):
+@pytest.mark.parametrize("c1, c2, epsilon", [(0.5, 0.01, 0.2), (1.0, 0.0, 0.2), (2.0, 0.5, 0.2), (0.5, 0.01, 0.35)])
+def test_clip_vf_s_objective_value_and_gradients(student, objective_batch, c1, c2, epsilon):
     logp, logp_old, advantages, values, targets, entropy = objective_batch
-    args = (logp, logp_old, advantages, values, targets, entropy, 0.2, c1, c2)
+    args = (logp, logp_old, advantages, values, targets, entropy, epsilon, c1, c2)
     value, grad_logp, grad_values, grad_entropy = call_checking_inputs(
         student.clip_vf_s_objective, "clip_vf_s_objective", *args
     )
@@ -113,7 +121,7 @@ def test_clip_vf_s_objective_value_and_gradients(student, objective_batch, c1, c
         check_scalar(value, "clip_vf_s_objective"),
         reference_objective(*args),
         "clip_vf_s_objective",
-        f"the value L^CLIP − c1 L^VF + c2 S (c1 = {c1}, c2 = {c2})",
+        f"the value L^CLIP − c1 L^VF + c2 S (c1 = {c1}, c2 = {c2}, ε = {epsilon})",
     )
     for grad, variable, what in [
         (grad_logp, logp, "∂L/∂ log π"),
@@ -125,7 +133,7 @@ def test_clip_vf_s_objective_value_and_gradients(student, objective_batch, c1, c
             grad,
             numerical_gradient(lambda: float(reference_objective(*args)), variable, 1e-7),
             "clip_vf_s_objective",
-            f"{what} (checked by finite differences, c1 = {c1}, c2 = {c2})",
+            f"{what} (checked by finite differences, c1 = {c1}, c2 = {c2}, ε = {epsilon})",
         )
 
 
