@@ -5,6 +5,8 @@ The implementation is chosen by the environment variable MINIPPO_IMPL:
 - ``exercises``: the student's modules in exercises/;
 - ``wrong``: the deliberately wrong variants in tests/exercises/wrong/ (each test runs once per variant of its
   chapter); the instructors' proof that the tests reject them;
+- ``right``: other correct ways to write the exercises, in tests/exercises/right/ (once per variant); the proof that
+  the tests accept any correct implementation, not only the reference's way;
 - a folder path: a folder holding chNN_*.py modules with the same functions (a copy of exercises/ elsewhere).
 
 Test modules import the ``student`` fixture and ``pytest_generate_tests`` from here. (A conftest.py in this folder
@@ -154,22 +156,26 @@ def _import_file(path: Path, name: str):
     return module
 
 
-def load_wrong_variant(chapter: str, variant: str):
-    """A fresh copy of the reference solution of ``chapter`` with the functions of one wrong variant swapped in.
+VARIANT_FOLDERS = ("wrong", "right")
+
+
+def load_wrong_variant(chapter: str, variant: str, folder: str = "wrong"):
+    """A fresh copy of the reference solution of ``chapter`` with the functions of one variant (from tests/exercises/
+    wrong/ or right/) swapped in.
 
     The swap is made in the copy's globals, so the solution's other functions call the wrong one too (as a student's
     ppo_update would call their own loss_and_grad).
     """
-    module = _import_file(ROOT / "solutions" / f"{chapter}.py", f"_solution_{chapter}_{variant}")
-    wrong = _import_file(ROOT / "tests" / "exercises" / "wrong" / f"{chapter}.py", f"_wrong_{chapter}")
+    module = _import_file(ROOT / "solutions" / f"{chapter}.py", f"_solution_{chapter}_{folder}_{variant}")
+    wrong = _import_file(ROOT / "tests" / "exercises" / folder / f"{chapter}.py", f"_{folder}_{chapter}")
     for name, function in wrong.VARIANTS[variant].items():
         setattr(module, name, function)
     return module
 
 
-def wrong_variants(chapter: str) -> list[str]:
-    path = ROOT / "tests" / "exercises" / "wrong" / f"{chapter}.py"
-    return list(_import_file(path, f"_wrong_{chapter}").VARIANTS) if path.exists() else []
+def wrong_variants(chapter: str, folder: str = "wrong") -> list[str]:
+    path = ROOT / "tests" / "exercises" / folder / f"{chapter}.py"
+    return list(_import_file(path, f"_{folder}_{chapter}").VARIANTS) if path.exists() else []
 
 
 _loaded: dict[tuple, object] = {}
@@ -187,8 +193,8 @@ def load_student(chapter: str, impl: str, variant: str | None = None):
 
 
 def _load(chapter: str, impl: str, variant: str | None):
-    if impl == "wrong":
-        return Student(load_wrong_variant(chapter, variant), f"wrong variant {chapter}:{variant}")
+    if impl in VARIANT_FOLDERS:
+        return Student(load_wrong_variant(chapter, variant, impl), f"{impl} variant {chapter}:{variant}")
     if impl in ("solutions", "exercises"):
         where = f"{impl}/{chapter}.py"
         path = ROOT / impl / f"{chapter}.py"
@@ -210,19 +216,20 @@ def _load(chapter: str, impl: str, variant: str | None):
 
 
 def pytest_generate_tests(metafunc):
-    """Under MINIPPO_IMPL=wrong, run every test once per wrong variant of its chapter."""
-    if "student" in metafunc.fixturenames and implementation() == "wrong":
-        variants = wrong_variants(chapter_of(metafunc.module.__name__))
-        metafunc.parametrize("student", variants or [None], indirect=True, ids=lambda v: f"wrong_{v}")
+    """Under MINIPPO_IMPL=wrong (or right), run every test once per wrong (or right) variant of its chapter."""
+    impl = implementation()
+    if "student" in metafunc.fixturenames and impl in VARIANT_FOLDERS:
+        variants = wrong_variants(chapter_of(metafunc.module.__name__), impl)
+        metafunc.parametrize("student", variants or [None], indirect=True, ids=lambda v: f"{impl}_{v}")
 
 
 @pytest.fixture
 def student(request):
     chapter = chapter_of(request.module.__name__)
     impl = implementation()
-    if impl == "wrong":
+    if impl in VARIANT_FOLDERS:
         if request.param is None:
-            pytest.skip(f"{chapter} has no wrong variants")
+            pytest.skip(f"{chapter} has no {impl} variants")
         return load_student(chapter, impl, request.param)
     return load_student(chapter, impl)
 

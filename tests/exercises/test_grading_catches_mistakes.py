@@ -1,5 +1,7 @@
 """The grading tests themselves, checked: no test passes against the untouched stubs, every deliberately wrong variant
-fails at least one test, every exercise function is graded, and exercises/ is what solutions/ generates.
+fails at least one test and its first failure names the mistake, every other correct way of writing an exercise
+(tests/exercises/right/) passes every test, every exercise function is graded, and exercises/ is what solutions/
+generates.
 
 Each check runs the grading tests in a child pytest process, the way ``minippo grade`` does.
 """
@@ -134,3 +136,21 @@ def test_every_wrong_variant_fails_at_least_one_grading_test():
         if pattern and not re.search(pattern, first.message):
             unnamed.append(f"{chapter}:{variant}: {first.message!r} does not match {pattern!r}")
     assert not unnamed, "first failures that do not name the mistake:\n" + "\n".join(unnamed)
+
+
+@pytest.mark.timeout(600)
+def test_no_right_variant_is_rejected():
+    files = [chapter_files()[n] for n in sorted(chapter_files())]
+    collected, results, note = run_tests("right", files, limit_s=500)
+    assert not note, note
+    ran = {re.search(r"\[.*?right_([A-Za-z0-9_]+)", r.nodeid).group(1) for r in results if "right_" in r.nodeid}
+    expected = set()
+    for chapter in exercises_by_chapter():
+        path = _harness.ROOT / "tests" / "exercises" / "right" / f"{chapter}.py"
+        spec = importlib.util.spec_from_file_location(f"_right_{chapter}", path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        expected |= set(module.VARIANTS)
+    assert ran == expected, f"right variants that did not run: {sorted(expected - ran)}"
+    rejected = [f"{r.nodeid}: {r.message}" for r in results if r.outcome == "failed"]
+    assert not rejected, "correct variants rejected by a grading test:\n" + "\n".join(rejected[:10])
