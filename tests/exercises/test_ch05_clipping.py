@@ -67,7 +67,7 @@ def test_clipped_surrogate_one_sample(student, ratio, advantage, epsilon):
     place = where_is_ratio(ratio, epsilon)
     inside = abs(ratio - 1) < epsilon
     check_array(grad, "clipped_surrogate", (1,), f"the gradient for {sample}")
-    why = f"r Â, since r is {place}" if inside else f"0: r is {place}, where clip(r) is a constant"
+    why = f"r Â, since r is {place}" if inside else f"clip(r) is a constant there: r is {place}"
     expect_number(grad, ratio * advantage if inside else 0.0, "clipped_surrogate", f"the gradient for {sample}", why)
     expected_value = clip(ratio, 1 - epsilon, 1 + epsilon) * advantage
     why = f"clip(r, 1 − ε, 1 + ε) Â, r is {place}"

@@ -62,7 +62,7 @@ def test_clip_objective_one_sample(student, ratio, advantage, epsilon, case):
     clipped_is_min = (ratio > 1 + epsilon and advantage > 0) or (ratio < 1 - epsilon and advantage < 0)
     check_array(grad, "clip_objective", (1,), f"the gradient for {sample}")
     expected_grad = 0.0 if clipped_is_min else ratio * advantage
-    why = f"0: {place}" if clipped_is_min else f"r Â: {place}"
+    why = f"the clipped term is the min, and it is flat: {place}" if clipped_is_min else f"r Â: {place}"
     expect_number(grad, expected_grad, "clip_objective", f"the gradient for {sample}", why)
     expect_number(value, per_sample_min(ratio, advantage, epsilon), "clip_objective", f"the value for {sample}", place)
 
