@@ -114,7 +114,7 @@ FIRST_FAILURE = {
     "gradient_zero_outside_the_band": r"r = 1\.5, Â = -1\.0.*should be -1\.5",
     "gradient_never_zero": r"r = 1\.5, Â = 1\.0.*should be 0",
     "case_by_case_on_log_ratio": r"r = 1\.21.*not on log r",
-    "gradient_mask_strict": r"gradient for one sample with r = 1\.1, Â = 2\.0.*should be 2\.2.*inside the band.*, not 0",
+    "gradient_mask_strict": r"r = 1\.1, Â = 2\.0.*should be 2\.2.*inside the band.*, not 0",
     "epsilon_fixed": r"ε = 0\.1",
     "gradient_of_the_min_value": r"r = 1\.5, Â = 1\.0.*should be 0",
     "ratio_from_exponentials": r"near −900.*exp\(log π − log π_old\)",
