@@ -286,8 +286,11 @@ def _number(x: float, digits: int = 6) -> str:
     return f"{x:.{digits}g}"
 
 
-def expect_number(got, expected: float, name: str, what: str, why: str = "", rtol=1e-6, atol=1e-9) -> None:
-    """One number: "name: what should be expected (why), not got", with enough digits to see the difference."""
+def expect_number(
+    got, expected: float, name: str, what: str, why: str = "", rtol=1e-6, atol=1e-9, alternatives=None
+) -> None:
+    """One number: "name: what should be expected (why), not got", with enough digits to see the difference.
+    ``alternatives``: {what a plausible mistake is: the number it gives}; the message names the one ``got`` equals."""
     got = check_scalar(got, name, what) if np.ndim(got) == 0 else check_array(got, name, (1,), what)[0]
     if abs(got - expected) <= atol + rtol * abs(expected):
         return
@@ -295,7 +298,15 @@ def expect_number(got, expected: float, name: str, what: str, why: str = "", rto
     while digits < 17 and _number(got, digits) == _number(expected, digits):
         digits += 3
     because = f" ({why})" if why else ""
-    raise AssertionError(f"{name}: {what} should be {_number(expected, digits)}{because}, not {_number(got, digits)}")
+    mistakes = [
+        words
+        for words, value in (alternatives or {}).items()
+        if value is not None and abs(got - value) <= atol + rtol * abs(value)
+    ]
+    named = ": " + " Or ".join(f"{words}?" for words in mistakes) if mistakes else ""
+    raise AssertionError(
+        f"{name}: {what} should be {_number(expected, digits)}{because}, not {_number(got, digits)}{named}"
+    )
 
 
 def check_close(actual, expected, name: str, what: str, rtol: float = 1e-6, atol: float = 1e-9, where=None) -> None:
@@ -349,7 +360,7 @@ def _pattern(actual: np.ndarray, expected: np.ndarray) -> str:
         return ""
     factors = actual[scale] / expected[scale]
     factor = float(np.median(factors))
-    if not np.allclose(factors, factor, rtol=1e-4) or abs(factor - 1) < 1e-6:
+    if not np.allclose(factors, factor, rtol=1e-4) or abs(factor - 1) < 1e-6 or abs(factor) < 1e-9:
         return ""
     for value, words in [
         (-1.0, "the sign is flipped everywhere"),

@@ -66,12 +66,30 @@ def test_clipped_surrogate_one_sample(student, ratio, advantage, epsilon):
     sample = f"one sample with r = {ratio}, Â = {advantage}, ε = {epsilon}"
     place = where_is_ratio(ratio, epsilon)
     inside = abs(ratio - 1) < epsilon
-    check_array(grad, "clipped_surrogate", (1,), f"the gradient for {sample}")
-    why = f"r Â, since r is {place}" if inside else f"clip(r) is a constant there: r is {place}"
-    expect_number(grad, ratio * advantage if inside else 0.0, "clipped_surrogate", f"the gradient for {sample}", why)
+    inverse = 1 / ratio
+    swapped = "r computed as π_old/π (log π and log π_old swapped)"
+    fixed = "ε fixed at 0.2 (the epsilon argument ignored)"
+    value_mistakes = {
+        fixed: clip(ratio, 0.8, 1.2) * advantage if epsilon != 0.2 else None,
+        swapped: clip(inverse, 1 - epsilon, 1 + epsilon) * advantage,
+        "r Â, the ratio unclipped": ratio * advantage,
+    }
     expected_value = clip(ratio, 1 - epsilon, 1 + epsilon) * advantage
     why = f"clip(r, 1 − ε, 1 + ε) Â, r is {place}"
-    expect_number(value, expected_value, "clipped_surrogate", f"the value for {sample}", why)
+    expect_number(
+        value, expected_value, "clipped_surrogate", f"the value for {sample}", why, alternatives=value_mistakes
+    )
+    check_array(grad, "clipped_surrogate", (1,), f"the gradient for {sample}")
+    grad_mistakes = {
+        fixed: (ratio * advantage if abs(ratio - 1) < 0.2 else 0.0) if epsilon != 0.2 else None,
+        swapped: inverse * advantage if abs(inverse - 1) < epsilon else 0.0,
+        "the gradient of the unclipped r Â, as if the clip were not there": None if inside else ratio * advantage,
+    }
+    why = f"r Â, since r is {place}" if inside else f"clip(r) is a constant there: r is {place}"
+    expected_grad = ratio * advantage if inside else 0.0
+    expect_number(
+        grad, expected_grad, "clipped_surrogate", f"the gradient for {sample}", why, alternatives=grad_mistakes
+    )
 
 
 @pytest.mark.parametrize("ratio, epsilon", FRACTION_CASES)

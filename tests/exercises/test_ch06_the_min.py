@@ -63,8 +63,34 @@ def test_clip_objective_one_sample(student, ratio, advantage, epsilon, case):
     check_array(grad, "clip_objective", (1,), f"the gradient for {sample}")
     expected_grad = 0.0 if clipped_is_min else ratio * advantage
     why = f"the clipped term is the min, and it is flat: {place}" if clipped_is_min else f"r Â: {place}"
-    expect_number(grad, expected_grad, "clip_objective", f"the gradient for {sample}", why)
-    expect_number(value, per_sample_min(ratio, advantage, epsilon), "clip_objective", f"the value for {sample}", place)
+    clipped = min(max(ratio, 1 - epsilon), 1 + epsilon)
+    inverse = 1 / ratio
+    swapped = "r computed as π_old/π (log π and log π_old swapped)"
+    inverse_flat = (inverse > 1 + epsilon and advantage > 0) or (inverse < 1 - epsilon and advantage < 0)
+    fixed_flat = (ratio > 1.2 and advantage > 0) or (ratio < 0.8 and advantage < 0)
+    grad_mistakes = {
+        "ε fixed at 0.2 (the epsilon argument ignored)": (0.0 if fixed_flat else ratio * advantage)
+        if epsilon != 0.2
+        else None,
+        swapped: 0.0 if inverse_flat else inverse * advantage,
+        "the gradient of the clipped term alone (no min): it vanishes outside the band also where the move hurts": (
+            ratio * advantage if abs(ratio - 1) < epsilon else 0.0
+        ),
+    }
+    value_mistakes = {
+        "ε fixed at 0.2 (the epsilon argument ignored)": per_sample_min(ratio, advantage, 0.2)
+        if epsilon != 0.2
+        else None,
+        swapped: per_sample_min(inverse, advantage, epsilon),
+        "max(r Â, clip(r) Â), the optimistic bound; L^CLIP takes the min": max(ratio, clipped) * advantage
+        if advantage > 0
+        else min(ratio, clipped) * advantage,
+        "the clipped term alone (no min with r Â)": clipped * advantage,
+        "min(r, clip(r)) Â: the min taken over the ratios, before multiplying by Â": min(ratio, clipped) * advantage,
+    }
+    expect_number(value, per_sample_min(ratio, advantage, epsilon), "clip_objective", f"the value for {sample}", place,
+                  alternatives=value_mistakes)  # fmt: skip
+    expect_number(grad, expected_grad, "clip_objective", f"the gradient for {sample}", why, alternatives=grad_mistakes)
 
 
 def test_clip_objective_with_log_probs_near_minus_900(student):

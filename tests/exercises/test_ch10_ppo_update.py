@@ -5,6 +5,7 @@ finally PPO learning CartPole-v1 with your update inside minippo's rollout, a ba
 
 Tests run from the most specific to the most general, so the first failure names the mistake."""
 
+import dataclasses
 import time
 
 import _harness
@@ -92,7 +93,6 @@ def check_loss(loss, agent, minibatch, config, what):
         "the advantages are not normalised although config.normalize_advantages is True": None,
         "the advantages are normalised although config.normalize_advantages is False": None,
         "a minibatch of one sample is normalised (its advantage becomes 0); leave it as it is": None,
-        "ε is fixed at 0.2 instead of config.clip_epsilon": None,
         "the advantages are normalised with the sample standard deviation (ddof = 1); the contract says np.std": None,
     }
     n = len(minibatch["advantages"])
@@ -105,10 +105,14 @@ def check_loss(loss, agent, minibatch, config, what):
         candidates[names[7]] = -loss_terms(agent, minibatch, config, normalize=True)[0] + c1 * value_term - c2 * entropy
     if config.normalize_advantages and n == 1:
         candidates[names[8]] = -loss_terms(agent, minibatch, config, normalize=True)[0] + c1 * value_term - c2 * entropy
-    if config.clip_epsilon != 0.2:
-        candidates[names[9]] = -loss_terms(agent, minibatch, config, epsilon=0.2)[0] + c1 * value_term - c2 * entropy
     if config.normalize_advantages and n > 1:
-        candidates[names[10]] = -loss_terms(agent, minibatch, config, ddof=1)[0] + c1 * value_term - c2 * entropy
+        candidates[names[9]] = -loss_terms(agent, minibatch, config, ddof=1)[0] + c1 * value_term - c2 * entropy
+    # a config field ignored: the loss is the one for the field's default value
+    for field in ("clip_epsilon", "value_coef", "entropy_coef", "normalize_advantages"):
+        default = getattr(Config(), field)
+        if getattr(config, field) != default:
+            words = f"config.{field} = {getattr(config, field)} is ignored: this is the loss for {field} = {default}"
+            candidates[words] = reference_loss(agent, minibatch, dataclasses.replace(config, **{field: default}))
     why = next(
         (
             name

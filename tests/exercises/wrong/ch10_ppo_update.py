@@ -186,6 +186,16 @@ def loss_sample_std(agent, minibatch, config):
     return _assemble(agent, minibatch, config, normalize=False)
 
 
+def loss_value_coef_fixed(agent, minibatch, config):
+    """c1 = 0.5 written into the code instead of config.value_coef."""
+    return _assemble(agent, minibatch, _with(config, value_coef=0.5))
+
+
+def loss_entropy_coef_fixed(agent, minibatch, config):
+    """c2 = 0.0 (the paper's MuJoCo setting) written into the code instead of config.entropy_coef."""
+    return _assemble(agent, minibatch, _with(config, entropy_coef=0.0))
+
+
 def update_normalises_the_whole_batch(agent, optimizer, data, config, rng):
     """Normalises the advantages once over the whole batch, then turns the per-minibatch normalisation off."""
     a = data["advantages"]
@@ -261,6 +271,8 @@ VARIANTS.update(
         "loss_epsilon_fixed": {"loss_and_grad": loss_epsilon_fixed},
         "loss_band_on_log_ratio": {"loss_and_grad": loss_band_on_log_ratio},
         "loss_sample_std": {"loss_and_grad": loss_sample_std},
+        "loss_value_coef_fixed": {"loss_and_grad": loss_value_coef_fixed},
+        "loss_entropy_coef_fixed": {"loss_and_grad": loss_entropy_coef_fixed},
         "update_normalises_the_whole_batch": {"ppo_update": update_normalises_the_whole_batch},
         "update_shuffles_once": {"ppo_update": update_shuffles_once},
         "update_global_random": {"ppo_update": update_global_random},
@@ -278,7 +290,9 @@ FIRST_FAILURE = {
     "loss_adds_the_value_term_with_a_minus": r"value loss enters with the wrong sign",
     "loss_forgets_the_entropy": r"entropy bonus c2 S is missing",
     "gradient_of_the_objective": r"sign is flipped everywhere",
-    "loss_epsilon_fixed": r"ε is fixed at 0\.2",
+    "loss_epsilon_fixed": r"config\.clip_epsilon = 0\.1 is ignored",
+    "loss_value_coef_fixed": r"config\.value_coef = .* is ignored",
+    "loss_entropy_coef_fixed": r"config\.entropy_coef = .* is ignored",
     "loss_band_on_log_ratio": r"not on log r",
     "loss_sample_std": r"sample standard deviation",
     "update_normalises_the_whole_batch": r"minibatch 1 .*not the whole batch",
