@@ -61,7 +61,9 @@ def test_unknown_chapter_names(text):
 def test_solutions_get_a_full_score():
     result = run_grade("5", "--solutions")
     assert result.returncode == 0, result.stdout + result.stderr
-    assert "ch05 clipping" in result.stdout and "7/7" in result.stdout and "all passed" in result.stdout
+    line = next(line for line in result.stdout.splitlines() if line.startswith("ch05 clipping"))
+    passed, total = map(int, line.split()[2].split("/"))
+    assert passed == total >= 20 and line.endswith("all passed"), result.stdout
 
 
 @pytest.mark.timeout(120)
@@ -73,7 +75,7 @@ def test_the_stubs_score_zero_and_say_why(tmp_path):
     result = run_grade("ch06", impl=tmp_path)
     assert result.returncode == 1, result.stdout + result.stderr
     line = next(line for line in result.stdout.splitlines() if line.startswith("ch06 the min"))
-    assert "0/12" in line and "clip_objective is not written yet" in line, result.stdout
+    assert line.split()[3].startswith("0/") and "clip_objective is not written yet" in line, result.stdout
     assert "total" in result.stdout and result.stderr == ""
 
 
@@ -137,7 +139,10 @@ def test_broken_student_code_fails_its_tests_and_never_stops_the_grader(tmp_path
     assert " 0/" in scores["3"] and "SyntaxError on line 2" in scores["3"], scores["3"]
     assert " 0/" in scores["4"] and "took longer than the time limit" in scores["4"], scores["4"]
     assert " 0/" in scores["5"] and "NaN" in scores["5"], scores["5"]
-    assert "categorical_kl raised ValueError: shapes do not match" in scores["9"], scores["9"]
+    assert (
+        "categorical_kl(logits_old=array (6, 4), logits=array (6, 4)) raised ValueError: shapes do not match"
+        in (scores["9"])
+    ), scores["9"]
 
 
 def test_grade_counts_every_test_and_reports_the_first_failure():

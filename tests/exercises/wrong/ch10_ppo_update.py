@@ -292,7 +292,7 @@ FIRST_FAILURE = {
     "gradient_of_the_objective": r"sign is flipped everywhere",
     "loss_epsilon_fixed": r"config\.clip_epsilon = 0\.1 is ignored",
     "loss_value_coef_fixed": r"config\.value_coef = .* is ignored",
-    "loss_entropy_coef_fixed": r"config\.entropy_coef = .* is ignored",
+    "loss_entropy_coef_fixed": r"entropy bonus c2 S is missing|config\.entropy_coef = .* is ignored",
     "loss_band_on_log_ratio": r"not on log r",
     "loss_sample_std": r"sample standard deviation",
     "update_normalises_the_whole_batch": r"minibatch 1 .*not the whole batch",
