@@ -73,7 +73,7 @@ def reference_loss(agent, minibatch, config):
 
 def check_loss(loss, agent, minibatch, config, what):
     """The loss is the reference, or the test fails naming the plausible mistake whose loss it equals."""
-    loss = check_scalar(loss, "loss_and_grad", "the loss")
+    loss = check_scalar(loss, "loss_and_grad", what)
     expected = reference_loss(agent, minibatch, config)
     if abs(loss - expected) <= 1e-6 * (1 + abs(expected)):
         return
@@ -166,6 +166,19 @@ def test_loss_and_grad_uses_config_clip_epsilon(student):
                 f"with config.clip_epsilon = {epsilon}, the loss for {sample} "
                 f"(r is {where_is_ratio(RATIOS[row], epsilon)})",
             )
+
+
+def test_loss_and_grad_with_equal_advantages(student):
+    # std Â = 0: the 1e-8 in (Â − mean Â) / (std Â + 1e-8) keeps the normalised advantages at 0, not NaN
+    config = Config(entropy_coef=0.01)
+    agent = make_agent("discrete")
+    minibatch = dict(make_minibatch(agent, 6), advantages=np.full(6, 2.5))
+    loss = student.loss_and_grad(agent, minibatch, config)
+    what = "the loss for a minibatch whose advantages are all equal (std Â = 0: divide by std Â + 1e-8)"
+    check_loss(loss, agent, minibatch, config, what)
+    assert np.all(np.isfinite(agent.grads)), (
+        "loss_and_grad: the gradient for equal advantages holds NaN or infinity (divide by std Â + 1e-8)"
+    )
 
 
 def test_loss_and_grad_normalises_advantages_per_minibatch(student):

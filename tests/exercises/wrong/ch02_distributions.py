@@ -269,3 +269,30 @@ FIRST_FAILURE = {
     "gaussian_log_prob_float32": r"float64.*not float32",
     "log_softmax_unshifted": r"±1000",
 }
+
+
+def log_softmax_global_max(logits):
+    """Subtracts the largest logit of the whole batch, not of each row: a row far below it underflows."""
+    shifted = logits - logits.max()
+    with np.errstate(divide="ignore"):
+        return shifted - np.log(np.exp(shifted).sum(axis=-1, keepdims=True))
+
+
+def log_softmax_without_keepdims(logits):
+    """The row maximum without keepdims: (n, k) − (n,) does not broadcast (or does, wrongly, when n = k)."""
+    shifted = logits - logits.max(axis=-1)
+    return shifted - np.log(np.exp(shifted).sum(axis=-1))
+
+
+VARIANTS.update(
+    {
+        "log_softmax_global_max": {"log_softmax": log_softmax_global_max},
+        "log_softmax_without_keepdims": {"log_softmax": log_softmax_without_keepdims},
+    }
+)
+FIRST_FAILURE.update(
+    {
+        "log_softmax_global_max": r"±1000",
+        "log_softmax_without_keepdims": r"could not be broadcast",
+    }
+)

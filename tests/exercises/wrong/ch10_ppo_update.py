@@ -305,3 +305,42 @@ FIRST_FAILURE = {
     "update_clips_after_the_step": r"max_grad_norm",
     "update_normalises_data_in_place": r"changed its input",
 }
+
+
+def loss_normalises_without_epsilon(agent, minibatch, config):
+    """(Â − mean Â) / std Â without the 1e-8: equal advantages give 0/0."""
+    n = len(minibatch["advantages"])
+    if config.normalize_advantages and n > 1:
+        a = minibatch["advantages"]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            minibatch = dict(minibatch, advantages=(a - a.mean()) / a.std())
+    return _assemble(agent, minibatch, config, normalize=False)
+
+
+def update_counts_the_keys(agent, optimizer, data, config, rng):
+    """n = len(data), the number of keys in the dict, instead of the number of rows."""
+    n, steps = len(data), 0
+    for _ in range(config.epochs):
+        order = rng.permutation(n) if config.shuffle_minibatches else np.arange(n)
+        for start in range(0, n, config.minibatch_size):
+            index = order[start : start + config.minibatch_size]
+            loss_and_grad(agent, {key: value[index] for key, value in data.items()}, config)
+            if config.grad_norm_clipping:
+                clip_grad_norm(agent.grads, config.max_grad_norm)
+            optimizer.step(agent.grads)
+            steps += 1
+    return steps
+
+
+VARIANTS.update(
+    {
+        "loss_normalises_without_epsilon": {"loss_and_grad": loss_normalises_without_epsilon},
+        "update_counts_the_keys": {"ppo_update": update_counts_the_keys},
+    }
+)
+FIRST_FAILURE.update(
+    {
+        "loss_normalises_without_epsilon": r"all equal \(std Â = 0\)|NaN",
+        "update_counts_the_keys": r"optimizer steps|rows",
+    }
+)
