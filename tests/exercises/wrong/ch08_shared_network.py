@@ -137,6 +137,10 @@ VARIANTS.update(
 )
 
 FIRST_FAILURE = {
-    "clipped_value_loss_epsilon_fixed": r"ε = 0\.4",
-    "objective_epsilon_fixed": r"ε = 0\.35",
+    "clipped_value_loss_min": r"the clipped loss is pessimistic, it takes the max",
+    "clipped_value_loss_gradient_through_clip": r"V\^clip is a constant",
+    "clipped_value_loss_epsilon_fixed": r"ε = 0\.4.*ε fixed at 0\.2",
+    "objective_epsilon_fixed": r"ε = 0\.35.*ε fixed at 0\.2",
+    "objective_adds_the_value_loss": r"value loss enters with −c1|the value loss added",
+    "objective_subtracts_the_entropy": r"the bonus enters with \+c2|entropy bonus subtracted",
 }
