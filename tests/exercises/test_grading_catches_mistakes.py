@@ -148,6 +148,8 @@ def test_no_right_variant_is_rejected():
     expected = set()
     for chapter in exercises_by_chapter():
         path = _harness.ROOT / "tests" / "exercises" / "right" / f"{chapter}.py"
+        if not path.exists():  # a chapter may have no other way worth showing
+            continue
         spec = importlib.util.spec_from_file_location(f"_right_{chapter}", path)
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)
