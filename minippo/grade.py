@@ -202,7 +202,7 @@ def run_tests(impl: str, files, stop_at_first_failure: bool = False, limit_s: fl
             env[LOG_VARIABLE] = str(log)
             command = [
                 sys.executable, "-m", "pytest", *targets, "-p", "minippo.grade", "-p", "no:cacheprovider",
-                "-q", "--no-header", "-o", "addopts=", "--continue-on-collection-errors", *extra_args,
+                "-q", "--no-header", "-o", "addopts=", "--continue-on-collection-errors", "--tb=line", *extra_args,
             ]  # fmt: skip
             returncode = None
             try:
