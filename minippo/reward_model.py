@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from minippo.language import NEGATIVE, POSITIVE, V, VOCAB, is_well_formed, make_corpus
+from minippo.language import NEGATIVE, POSITIVE, VOCAB, V, is_well_formed, make_corpus
 from minippo.optimizer import Adam
 
 ILL_FORMED_SCORE = -(len(NEGATIVE) + 1)  # below the worst well-formed sentence (every negative adjective once)
@@ -36,7 +36,7 @@ def token_counts(tokens: np.ndarray, lengths: np.ndarray) -> np.ndarray:
 
 
 def make_preferences(n_pairs: int, rng: np.random.Generator):
-    """Pairs of corpus sentences with the rater's noisy choice: returns (preferred, rejected), each (tokens, lengths)."""
+    """Pairs of corpus sentences with the rater's noisy choice: (preferred, rejected), each (tokens, lengths)."""
     first, second = make_corpus(n_pairs, rng), make_corpus(n_pairs, rng)
     scores = [np.array([rater_score(VOCAB[t] for t in row[:n]) for row, n in zip(*half)]) for half in (first, second)]
     first_wins = rng.random(n_pairs) < 1.0 / (1.0 + np.exp(-(scores[0] - scores[1])))

@@ -20,10 +20,22 @@ from minippo import advantages as adv
 from minippo import losses
 from minippo.agent import ActorCritic
 from minippo.distributions import Categorical
-from minippo.language import BOS, EOS, MAX_LEN, TOKEN, VOCAB, is_well_formed, prefix_features
+from minippo.language import (
+    BOS,
+    EOS,
+    MAX_LEN,
+    TOKEN,
+    VOCAB,
+    generate,
+    is_well_formed,
+    make_corpus,
+    new_language_model,
+    prefix_features,
+    pretrain,
+)
 from minippo.optimizer import Adam
 from minippo.ppo import Config, update_minibatch
-from minippo.reward_model import RewardModel, rater_score
+from minippo.reward_model import RewardModel, make_preferences, rater_score
 
 
 @dataclass
@@ -150,9 +162,25 @@ def train_rlhf(pretrained: ActorCritic, reward_model: RewardModel, config: RLHFC
     return agent, history
 
 
+def pretrained_pieces(seed: int = 0, corpus_size: int = 3000, pairs: int = 2000, hidden: int = 128, epochs: int = 12):
+    """The two pieces RLHF starts from, made from ``seed``: the language model pretrained on a corpus of the grammar
+    (π_ref), and the reward model fitted to the rater's preferences. Returns (model, reward model, record), the
+    record holding the pretraining losses, the reward model's losses and its accuracy on fresh pairs."""
+    rng = np.random.default_rng(seed)
+    tokens, lengths = make_corpus(corpus_size, rng)
+    model = new_language_model(rng, hidden)
+    pretrain_losses = pretrain(model, tokens, lengths, rng, epochs=epochs)
+    preferred, rejected = make_preferences(pairs, rng)
+    reward_model = RewardModel()
+    reward_losses = reward_model.fit(preferred, rejected)
+    held_out = make_preferences(pairs, rng)
+    record = {"pretrain_losses": pretrain_losses, "reward_losses": reward_losses,
+              "train_accuracy": reward_model.accuracy(preferred, rejected),
+              "held_out_accuracy": reward_model.accuracy(*held_out)}
+    return model, reward_model, record
+
+
 def samples(model: ActorCritic, n: int, rng: np.random.Generator) -> list[str]:
     """n sequences sampled from ``model``, as text."""
-    from minippo.language import generate
-
     tokens, lengths = generate(model, n, rng)
     return [" ".join(VOCAB[t] for t in row[:length]) for row, length in zip(tokens, lengths)]
