@@ -87,5 +87,6 @@ class RewardModel:
         return history
 
     def accuracy(self, preferred, rejected) -> float:
-        """The fraction of pairs whose preferred sentence the model scores higher."""
-        return float(np.mean(self.score(*preferred) > self.score(*rejected)))
+        """The fraction of pairs whose preferred sentence the model scores higher (a tie counts half)."""
+        first, second = self.score(*preferred), self.score(*rejected)
+        return float(np.mean((first > second) + 0.5 * (first == second)))

@@ -165,7 +165,8 @@ def train_rlhf(pretrained: ActorCritic, reward_model: RewardModel, config: RLHFC
 def pretrained_pieces(seed: int = 0, corpus_size: int = 3000, pairs: int = 2000, hidden: int = 128, epochs: int = 12):
     """The two pieces RLHF starts from, made from ``seed``: the language model pretrained on a corpus of the grammar
     (π_ref), and the reward model fitted to the rater's preferences. Returns (model, reward model, record), the
-    record holding the pretraining losses, the reward model's losses and its accuracy on fresh pairs."""
+    record holding the pretraining losses, the reward model's losses and its agreement with the rater on its own pairs
+    and on fresh ones (where ties count half)."""
     rng = np.random.default_rng(seed)
     tokens, lengths = make_corpus(corpus_size, rng)
     model = new_language_model(rng, hidden)
@@ -174,9 +175,12 @@ def pretrained_pieces(seed: int = 0, corpus_size: int = 3000, pairs: int = 2000,
     reward_model = RewardModel()
     reward_losses = reward_model.fit(preferred, rejected)
     held_out = make_preferences(pairs, rng)
+    rule = [np.array([rater_score(VOCAB[t] for t in row[:n]) for row, n in zip(*side)]) for side in held_out]
     record = {"pretrain_losses": pretrain_losses, "reward_losses": reward_losses,
               "train_accuracy": reward_model.accuracy(preferred, rejected),
-              "held_out_accuracy": reward_model.accuracy(*held_out)}
+              "held_out_accuracy": reward_model.accuracy(*held_out),
+              # the rater's own rule as a model: the most any model can agree with the rater's noisy choices
+              "rule_held_out_accuracy": float(np.mean((rule[0] > rule[1]) + 0.5 * (rule[0] == rule[1])))}
     return model, reward_model, record
 
 
