@@ -133,6 +133,13 @@ def test_ppo_on_tokens_raises_the_reward_with_a_bounded_kl_and_hacks_it_without_
     assert end["free"]["kl_to_reference"] > 5 * end["penalised"]["kl_to_reference"]
 
 
+def test_the_pretrained_pieces_are_the_same_for_the_same_seed():
+    first = pretrained_pieces(seed=5, corpus_size=200, pairs=100, hidden=16, epochs=2)
+    second = pretrained_pieces(seed=5, corpus_size=200, pairs=100, hidden=16, epochs=2)
+    assert np.array_equal(first[0].params, second[0].params) and np.array_equal(first[1].weights, second[1].weights)
+    assert first[2] == second[2]
+
+
 def test_the_same_seed_gives_the_same_run_bitwise(pieces):
     model, reward_model, _ = pieces
     config = RLHFConfig(seed=3, beta=0.2, updates=2, sequences=16)
