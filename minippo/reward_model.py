@@ -6,7 +6,7 @@ Pairs of sentences from the corpus are compared, and the rater prefers one with 
 P(a ≻ b) = σ(score(a) − score(b)), so its labels are noisy like a person's.
 
 The reward model is linear in the counts of the tokens: r(x) = Σ_w c_w(x) θ_w. Every pair it learns from is well
-formed, so nothing in its data says that a word said twice is not twice as good: that is its flaw.
+formed, so nothing in its data says that an adjective said twice is not twice as good: that is its flaw.
 """
 
 from __future__ import annotations
