@@ -144,7 +144,11 @@ def test_no_right_variant_is_rejected():
     files = [chapter_files()[n] for n in sorted(chapter_files())]
     collected, results, note = run_tests("right", files, limit_s=500)
     assert not note, note
-    ran = {re.search(r"\[.*?right_([A-Za-z0-9_]+)", r.nodeid).group(1) for r in results if "right_" in r.nodeid}
+    ran = {
+        re.search(r"\[.*?right_([A-Za-z0-9_]+)", r.nodeid).group(1)
+        for r in results
+        if "right_" in r.nodeid and r.outcome != "skipped"  # a chapter without right variants skips its tests
+    }
     expected = set()
     for chapter in exercises_by_chapter():
         path = _harness.ROOT / "tests" / "exercises" / "right" / f"{chapter}.py"
