@@ -410,6 +410,7 @@ def grade_class(
             rows.append(row)
             score = f"{passed}/{len(mine)}"
             shown = comment if len(comment) <= 100 else comment[:97] + "..."
+            shown = shown or "all passed"
             print(f"{student.name:<{width}}  {chapter_title(number):<22}  {score:>7}  {shown}", file=out, flush=True)
     if csv_path is not None:
         with open(Path(csv_path).expanduser(), "w", newline="", encoding="utf-8") as handle:
