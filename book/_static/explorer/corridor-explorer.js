@@ -391,6 +391,7 @@
     this.lastRoundBroken = false;
     this.brokenRounds = 0;
     this.reached90 = false;
+    this.betaRun = null;
     this.finished = false;
     this.syncControls();
     if (announce) this.log("Reset: round 1 starts again from the uniform policy.");
@@ -498,12 +499,7 @@
       const before = this.record;
       const record = ex.tick();
       this.record = record;
-      if (record.objective === "klpen" && record.beta !== before.beta) {
-        // eq. 8's rule acted as the round ended, on the KL d the whole round reached
-        this.log(
-          "round " + before.round + " ended at KL d = " + fmt(before.kl, 4) + (record.beta < before.beta ? " < d_targ/1.5: \u03b2 halves to " : " > 1.5 d_targ: \u03b2 doubles to ") + fmtBeta(record.beta)
-        );
-      }
+      if (record.objective === "klpen" && record.beta !== before.beta) this.logBeta(before, record);
       this.history.push({ ret: record.return, kl: record.kl });
       if (!record.held && !this.roundBroken) {
         this.roundBroken = true;
@@ -519,6 +515,28 @@
     }
   };
 
+  // eq. 8's rule acted as a round ended, on the KL d the whole round reached. A run of changes in one direction
+  // is one line of the log, rewritten in place, so that a β halving round after round cannot flood it.
+  CorridorExplorer.prototype.logBeta = function (before, record) {
+    const halves = record.beta < before.beta;
+    const run = this.betaRun;
+    const d = before.kl >= 1e-4 ? fmt(before.kl, 4) : before.kl.toExponential(1);
+    if (run && run.halves === halves && run.last === before.round - 1 && this.logList.firstChild === run.item) {
+      run.last = before.round;
+      run.count += 1;
+      run.item.textContent = minus(
+        "rounds " + run.first + "\u2013" + run.last + ": KL d " + (halves ? "below d_targ/1.5" : "above 1.5 d_targ") +
+          " every round, \u03b2 " + (halves ? "halved " : "doubled ") + run.count + " times to " + fmtBeta(record.beta) +
+          " (last d = " + d + ")"
+      );
+      return;
+    }
+    const item = this.log(
+      "round " + before.round + " ended at KL d = " + d + (halves ? " < d_targ/1.5: \u03b2 halves to " : " > 1.5 d_targ: \u03b2 doubles to ") + fmtBeta(record.beta)
+    );
+    this.betaRun = { halves: halves, first: before.round, last: before.round, count: 1, item: item };
+  };
+
   CorridorExplorer.prototype.endOfRound = function () {
     const r = this.record;
     if (!this.roundBroken && this.lastRoundBroken) {
@@ -532,6 +550,7 @@
     const item = el("li", { text: minus(text) });
     this.logList.insertBefore(item, this.logList.firstChild);
     while (this.logList.children.length > MAX_LOG) this.logList.removeChild(this.logList.lastChild);
+    return item;
   };
 
   // ---------------------------------------------------------------- drawing
