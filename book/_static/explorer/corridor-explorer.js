@@ -572,7 +572,8 @@
     const p = this.statusParts;
     p.round.value.textContent = String(ex.round);
     p.epoch.value.textContent = ex.epoch + "/" + ex.settings.epochs;
-    p.kl.value.textContent = fmt(rec.kl, 3) + " (limit " + fmt(rec.kl_limit, 3) + ")";
+    const klDigits = rec.kl_limit < 0.01 ? 4 : 3; // ε = 0.05 puts the limit at 0.0025, which three digits would round
+    p.kl.value.textContent = fmt(rec.kl, klDigits) + " (limit " + fmt(rec.kl_limit, klDigits) + ")";
     p.return.value.textContent = minus(fmt(rec.return, 3)) + " / " + fmt(ex.optimal, 3) + " optimal";
     p.clipped.value.textContent = percent(rec.clip_fraction);
     const clipLabel = ex.settings.objective === "clip" ? "clipped " : "outside band ";
@@ -689,7 +690,7 @@
     place("optimal", yRet(ex.optimal) + 11, "optimal " + fmt(ex.optimal, 3));
     place("klTop", c.top, fmt(klMax, 2));
     place("klZero", c.bottom, "0");
-    place("limit", yKl(limit) - 5, "KL limit \u03b5\u00b2 = " + fmt(limit, 3));
+    place("limit", yKl(limit) - 5, "KL limit \u03b5\u00b2 = " + fmt(limit, limit < 0.01 ? 4 : 3));
     T.xEnd.textContent = "round " + ex.round;
   };
 
