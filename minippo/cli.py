@@ -182,9 +182,15 @@ def sweep_file_words(line: str) -> list[str]:
 
 
 def cmd_grade(args) -> int:
-    from minippo.grade import grade
+    from minippo.grade import grade, grade_class
 
-    return grade(args.chapter, solutions=args.solutions)
+    if args.class_folder is not None:
+        if args.solutions:
+            raise MinippoError("--class grades the students' folders; leave out --solutions")
+        return grade_class(args.class_folder, args.chapter, csv_path=args.csv)
+    if args.csv is not None:
+        raise MinippoError("--csv goes with --class FOLDER (a folder of student folders)")
+    return grade(args.chapter, solutions=args.solutions, verbose=args.verbose)
 
 
 def build_parser() -> Parser:
@@ -239,9 +245,13 @@ def build_parser() -> Parser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_sweep)
 
-    p = sub.add_parser("grade", help="grade your exercises, chapter by chapter")
+    p = sub.add_parser("grade", help="grade your exercises, chapter by chapter (or a whole class with --class)")
     p.add_argument("chapter", nargs="?", help="a chapter number or name (default: all)")
     p.add_argument("--solutions", action="store_true", help="grade the reference solutions instead")
+    p.add_argument("--verbose", "-v", action="store_true", help="list every failing test with its message")
+    p.add_argument("--class", dest="class_folder", metavar="FOLDER",
+                   help="grade a class: FOLDER holds one folder of chNN_*.py modules per student")  # fmt: skip
+    p.add_argument("--csv", metavar="FILE", help="with --class: write one row per student and chapter to FILE")
     p.set_defaults(func=cmd_grade)
     return parser
 
