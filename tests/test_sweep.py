@@ -360,11 +360,13 @@ def test_a_sweep_runs_on_both_nodes_of_a_two_node_cluster(two_nodes, tmp_path):
     assert {n["NodeManagerAddress"] for n in nodes.values()} == {"127.0.0.1"}
 
     out = tmp_path / "sweep"
-    words = ["sweep", "CartPole-v1", "--seeds", "1-2", "--steps", "4096", "--grid", "clip_epsilon=0.1,0.3"]
+    # runs long enough (a few seconds) that the second run starts while the first still holds its node's one CPU
+    words = ["sweep", "CartPole-v1", "--seeds", "1-2", "--steps", "16384", "--grid", "clip_epsilon=0.1,0.3"]
     assert main([*words, "--out", str(out), "--address", address, "--quiet"]) == 0
     rows = rows_of(out / "sweep.csv")
-    assert len(rows) == 4 and {row["status"] for row in rows} == {"ok"}
-    assert {row["node"] for row in rows} == set(nodes)  # runs on both nodes, and only there
+    assert len(rows) == 4 and {row["status"] for row in rows} == {"ok"}, rows
+    ran_on = [row["node"] for row in rows]
+    assert set(ran_on) == set(nodes), (ran_on, list(nodes))  # runs on both nodes, and only there
     for row in rows:
         assert_same_as_train_alone(row, tmp_path / "alone")
 
