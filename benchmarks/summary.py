@@ -570,60 +570,96 @@ def same_math_lines(rows: list[dict]) -> list[str]:
     return lines
 
 
-def readme_blocks(results) -> dict[str, str]:
-    """The README's generated blocks, by name: the seven-task table, the speed paragraph, Table 1."""
+def rechecks_lines(results) -> list[str]:
+    """The seven tasks measured again: Hopper's recheck over more seeds, the same defaults at later code, the
+    networks in float64, and the same-math comparisons of an earlier commit with a later one."""
     results = Path(results)
-    stats = task_stats(records.read_rows(results / "mujoco.csv"))
-    table1 = records.read_rows(results / "table1.csv")
     recheck = recheck_lines(records.read_rows(results / "hopper_recheck.csv"))
     float64 = recheck_lines(
         records.read_rows(results / "float64_runs.csv"), "float64_runs.csv", "with the networks in float64"
     )
     same_math = same_math_lines(records.read_rows(results / "same_math.csv"))
+    lines = ["## The seven tasks, measured again", ""]
+    lines += [*recheck, ""] if recheck else []
+    lines += [*current_code_lines(records.read_rows(results / "table1_1m_runs.csv"))[1:], ""]
+    lines += [*float64, ""] if float64 else []
     if same_math:
-        same_math = [
+        lines += [
             "Same training, other rounding: `benchmarks/same_math.py` trains a few updates at an earlier commit and at "
             "the current one, same task and seed, and compares them update by update "
             "(`benchmarks/results/same_math.csv`). Agreement to rounding at update 1 means the later code computes "
             "the same algorithm; after that, rounding differences grow until the two runs are different samples of it.",
             "",
             *same_math,
-        ]
-    table1_1m = records.read_rows(results / "table1_1m.csv")
-    full_runs = records.read_rows(results / "table1_1m_runs.csv")
-    randoms = records.read_rows(results / "random.csv")
-    full_length = []
-    if table1_1m:
-        tasks = table1_1m[0]["task_ids"].split()
-        names = ", ".join(tasks[:-1]) + " and " + tasks[-1] if len(tasks) > 1 else tasks[0]
-        runs = sum(int(row["runs"]) for row in table1_1m)
-        heading = (
-            f"At the paper's full scale, all 7 of its tasks ({names}), {table1_1m[0]['seeds']} seeds, 1M steps: "
-            f"{runs} runs:"
-            if len(tasks) == 7
-            else f"At the paper's 1M steps, on {len(tasks)} of the paper's 7 tasks ({names}):"
-        )
-        shorter = "The first reduction, on three tasks at 250k steps:"
-        by_task = table1_by_task(table1_1m, full_runs, randoms)
-        leader = leader_sentence(by_task)
-        note = " Every setting's score task by task is in `benchmarks/results/summary.md`."
-        full_length = [
-            heading,
             "",
-            *table1_lines(table1_1m, [], stale_settings("table1_1m_runs.csv", table1_1m)),
-            *(["", leader + note] if leader else []),
         ]
-        full_length += ["", *rerun_blocks(results, full_runs, randoms), shorter, ""]
+    return lines
+
+
+def compact_mujoco_lines(stats: dict[str, dict], current: dict[str, dict]) -> list[str]:
+    """The README's results table: per task, minippo's mean ± std over seeds from the seven-task record and from the
+    same defaults at the current code (Table 1's ε = 0.2 runs), beside the paper and CleanRL."""
+    lines = [
+        "| Task (Gymnasium v5) | minippo (`mujoco.csv`) | same, current code | paper (Fig. 3) | CleanRL (v4) |",
+        "|---|---:|---:|---:|---:|",
+    ]
+
+    def cell(table, env_id):
+        s = table.get(env_id)
+        digits = 1 if s and abs(s["mean"]) < 100 else 0
+        return f"{s['mean']:.{digits}f} ± {s['std']:.{digits}f}" if s else "not run"
+
+    for env_id in TASKS:
+        lines.append(
+            f"| {env_id} | {cell(stats, env_id)} | {cell(current, env_id)} | {paper_text(env_id)} "
+            f"| {CLEANRL.get(env_id, '—')} |"
+        )
+    complete, above = complete_and_above(stats)
+    now_complete, now_above = complete_and_above(current)
+    lines += [
+        "",
+        f"Each cell: {', '.join(sorted({str(len(s['returns'])) for s in stats.values()}))} seeds, 1M steps, the mean "
+        "return of the last 100 training episodes. At or above the paper's value (the low end of its read-off range) "
+        f"on {len(above)} of {len(complete)} tasks in the seven-task record, {len(now_above)} of {len(now_complete)} "
+        "at the current code.",
+    ]
+    return lines
+
+
+def table1_sentence(table: list[dict], pending: list[str]) -> str:
+    """Table 1 at 1M steps in one sentence: where the paper's best and worst settings stand, and what is missing."""
+    if not table:
+        return "Table 1 has no complete setting recorded yet."
+    ranked = sorted(table, key=lambda row: -float(row["score"]))
+    names = [row["setting"] for row in ranked]
+    scores = {row["setting"]: score_text(row) for row in table}
+    clip, none = "Clipping, ε = 0.2", "No clipping or penalty"
+    text = f"Table 1 at the paper's scale (1M steps, {table[0]['tasks']} tasks, {table[0]['seeds']} seeds, scored as "
+    text += f"in the paper): best here {ranked[0]['setting']} ({scores[names[0]]})"
+    if clip in scores:
+        text += f"; {clip} {scores[clip]}, {names.index(clip) + 1} of {len(names)} (paper: 0.82, first)"
+    if none in scores:
+        text += f"; no clipping {scores[none]}, {names.index(none) + 1} of {len(names)} (paper: −0.39, last)"
+    text += "."
+    if pending:
+        text += (
+            f" {len(pending)} KL-penalty settings are being rerun after a fix to the penalty and are not scored yet."
+        )
+    return text
+
+
+def readme_blocks(results) -> dict[str, str]:
+    """The README's generated blocks, by name: the results table, the speed sentence, Table 1 in one sentence.
+    Everything else the records say is in summary.md."""
+    results = Path(results)
+    stats = task_stats(records.read_rows(results / "mujoco.csv"))
+    full_runs = records.read_rows(results / "table1_1m_runs.csv")
+    current = task_stats([row for row in full_runs if row["setting"] == "Clipping, ε = 0.2"])
+    table1_1m = records.read_rows(results / "table1_1m.csv")
     return {
-        "mujoco": "\n".join(
-            mujoco_table(stats)
-            + (["", *recheck] if recheck else [])
-            + current_code_lines(full_runs)
-            + (["", *float64] if float64 else [])
-            + (["", *same_math] if same_math else [])
-        ),
+        "mujoco": "\n".join(compact_mujoco_lines(stats, current)),
         "speed": speed_sentence(records.read_rows(results / "speed.csv")),
-        "table1": "\n".join(full_length + table1_lines(table1, [], stale_settings("table1_runs.csv", table1))),
+        "table1": table1_sentence(table1_1m, stale_settings("table1_1m_runs.csv", table1_1m)),
     }
 
 
@@ -752,6 +788,7 @@ def build(results, runs_root) -> tuple[str, list[str]]:
         parts += [f"Records made at commit(s) {', '.join(commits)}; each row of mujoco.csv holds its command.", ""]
     if mujoco_rows:
         parts += ["![Learning curves: mean over seeds, band from min to max](mujoco_curves.png)", ""]
+    parts += rechecks_lines(results)
     table1_1m = records.read_rows(results / "table1_1m.csv")
     if table1_1m:
         parts += [

@@ -108,7 +108,8 @@ class ActorCritic:
             "obs_dim": self.obs_dim,
             "kind": self.kind,
             "act_dim": self.act_dim,
-            "hidden_sizes": list(self.hidden_sizes), "dtype": self.dtype.name,
+            "hidden_sizes": list(self.hidden_sizes),
+            "dtype": self.dtype.name,
             "shared": self.shared,
         }
 
@@ -132,8 +133,14 @@ def load_policy(path):
         with np.load(path, allow_pickle=False) as data:
             stored = {key: data[key] for key in data.files}
         meta = json.loads(str(stored["meta"]))
-        agent = ActorCritic(meta["obs_dim"], meta["kind"], meta["act_dim"], meta["hidden_sizes"], meta["shared"],
-                            dtype=meta.get("dtype", "float64"))
+        agent = ActorCritic(
+            meta["obs_dim"],
+            meta["kind"],
+            meta["act_dim"],
+            meta["hidden_sizes"],
+            meta["shared"],
+            dtype=meta.get("dtype", "float64"),
+        )
         if stored["params"].shape != agent.params.shape:
             raise ValueError("weights of the wrong size")
         agent.params[...] = stored["params"]
@@ -143,7 +150,14 @@ def load_policy(path):
     except FileNotFoundError:
         raise MinippoError(f"no policy at {path}")
     except (OSError, ValueError, KeyError, zipfile.BadZipFile, json.JSONDecodeError, EOFError) as error:
-        raise MinippoError(f"cannot read the policy {path}: it is corrupted or not a minippo policy ({error})")
+        # NumPy's own message may advise allow_pickle, which would run code from the file: say it in our words
+        reason = {
+            zipfile.BadZipFile: "not an .npz archive",
+            KeyError: f"no entry {error}",
+            json.JSONDecodeError: "its description is not JSON",
+            EOFError: "the file ends early",
+        }.get(type(error), "its weights do not fit" if "wrong size" in str(error) else "not an .npz archive")
+        raise MinippoError(f"cannot read the policy {path}: it is corrupted or not a minippo policy ({reason})")
     if not np.all(np.isfinite(agent.params)):
         raise MinippoError(f"the policy {path} holds NaN or infinite weights")
     return agent, normalizer, meta

@@ -14,9 +14,37 @@ from minippo.errors import MinippoError, NonFiniteError
 RUN_FILES = ("config.json", "progress.csv", "policy.npz", "checkpoint.npz", "curve.png")
 
 
+class HelpWithDefaults(argparse.HelpFormatter):
+    """Each option's help ends with its default, where it has one worth saying."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        unsaid = action.default is None or action.default is False or action.default == [] or not action.option_strings
+        if not unsaid and action.default is not argparse.SUPPRESS and "%(default)" not in text:
+            text += " (default: %(default)s)"
+        return text
+
+
 class Parser(argparse.ArgumentParser):
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", HelpWithDefaults)
+        super().__init__(*args, **kwargs)
+
     def error(self, message):  # one line, no usage dump
         raise MinippoError(message)
+
+
+def steps_notice(config) -> str | None:
+    """What a --steps that is not a whole number of batches trains: Algorithm 1 collects N·T steps an update, so a
+    run is a whole number of updates (at least one); the rest is dropped, and said."""
+    trained = config.num_updates * config.batch_size
+    if trained == config.total_steps:
+        return None
+    updates = f"{config.num_updates} update{'s' if config.num_updates > 1 else ''}"
+    return (
+        f"--steps {config.total_steps:,} is not a multiple of the batch (N·T = {config.batch_size:,} steps); "
+        f"training {trained:,} steps ({updates})"
+    )
 
 
 def parse_override(text: str, fields: dict):
@@ -79,6 +107,9 @@ def cmd_train(args) -> int:
     from minippo.envs import make_env
 
     make_env(config.env_id).close()  # an unknown id or an unsupported space is refused before anything starts
+    notice = steps_notice(config)
+    if notice and not args.resume:
+        print(f"minippo: {notice}", file=sys.stderr)
 
     bar = None
     if not args.quiet:
@@ -90,6 +121,8 @@ def cmd_train(args) -> int:
             dynamic_ncols=True,
             desc=config.env_id,
             file=sys.stderr,
+            # tqdm's own rate would count the start-up too; the trainer's steps/s in the postfix is the one rate
+            bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} [{elapsed}<{remaining}{postfix}]",
         )
 
     def on_update(row):
@@ -198,13 +231,25 @@ def build_parser() -> Parser:
     sub = parser.add_subparsers(dest="command", parser_class=Parser)
     sub.required = True
 
-    p = sub.add_parser("train", help="train PPO on a Gymnasium environment")
-    p.add_argument("env_id")
-    p.add_argument("--steps", type=int)
-    p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--out", required=True)
-    p.add_argument("--objective", choices=["clip", "cpi", "klpen", "pg"], default="clip")
-    p.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE", help="override Config fields")
+    p = sub.add_parser(
+        "train",
+        help="train PPO on a Gymnasium environment",
+        description="Train PPO (Algorithm 1 with the paper's MuJoCo settings) and write the run folder: config.json, "
+        "progress.csv (one row per update), policy.npz, checkpoint.npz and curve.png.",
+    )
+    p.add_argument("env_id", help="a Gymnasium id with flat Box observations, e.g. CartPole-v1 or Hopper-v5")
+    p.add_argument(
+        "--steps",
+        type=int,
+        help="environment steps to train (required unless --resume); a run is whole updates of N·T steps, so a "
+        "number that is not a multiple is cut down to one (and said)",
+    )
+    p.add_argument("--seed", type=int, default=1, help="seeds the networks, the sampling and the environments")
+    p.add_argument("--out", required=True, help="the run folder to write (created if missing)")
+    p.add_argument("--objective", choices=["clip", "cpi", "klpen", "pg"], default="clip",
+                   help="the surrogate: L^CLIP (eq. 7), L^CPI (eq. 6), the KL penalty (eq. 8) or L^PG")  # fmt: skip
+    p.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE",
+                   help="override any field of minippo.Config, e.g. horizon=512 entropy_coef=0.01")  # fmt: skip
     p.add_argument("--force", action="store_true", help="overwrite the run files in an existing --out")
     p.add_argument("--resume", action="store_true", help="continue from --out's last checkpoint")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -212,15 +257,15 @@ def build_parser() -> Parser:
 
     p = sub.add_parser("eval", help="run a saved policy deterministically")
     p.add_argument("run", help="a run folder (or a policy.npz)")
-    p.add_argument("--episodes", type=int, default=10)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--gif", help="write an animation of the first episode")
+    p.add_argument("--episodes", type=int, default=10, help="episodes to run; their mean ± std return is printed")
+    p.add_argument("--seed", type=int, default=0, help="episode i resets the environment with seed + i")
+    p.add_argument("--gif", metavar="FILE", help="write an animation of the first episode to FILE")
     p.set_defaults(func=cmd_eval)
 
     p = sub.add_parser("plot", help="overlay learning curves (mean and spread over seeds)")
-    p.add_argument("runs", nargs="+")
-    p.add_argument("--out", required=True)
-    p.add_argument("--title")
+    p.add_argument("runs", nargs="+", help="run folders; runs that differ only in their seed are drawn as one curve")
+    p.add_argument("--out", required=True, help="the PNG to write")
+    p.add_argument("--title", help="the figure's title")
     p.set_defaults(func=cmd_plot)
 
     p = sub.add_parser(

@@ -11,12 +11,15 @@ import numpy as np
 from minippo.errors import MinippoError
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # offscreen rendering for --gif, on machines without a display
+os.environ.setdefault("SDL_VIDEODRIVER", "dummy")  # the same for pygame's renderer (CartPole and the classic tasks)
 
 
 def check_env_id(env_id: str) -> None:
     if env_id in gym.registry:
         return
-    close = difflib.get_close_matches(env_id, list(gym.registry), n=3, cutoff=0.5)
+    # near misses only (a typo, a case slip, another version): an id that resembles nothing gets no guess
+    by_lower = {name.lower(): name for name in gym.registry}
+    close = [by_lower[name] for name in difflib.get_close_matches(env_id.lower(), list(by_lower), n=3, cutoff=0.8)]
     hint = f"; did you mean {', '.join(close)}?" if close else "; see gymnasium.registry for the ids"
     raise MinippoError(f"unknown environment id '{env_id}'{hint}")
 
@@ -44,8 +47,13 @@ def make_env(env_id: str, render_mode: str | None = None, size: int | None = Non
         extra = {} if render_mode is None else {"render_mode": render_mode}
         if size is not None and "mujoco" in str(gym.spec(env_id).entry_point):
             # a camera that follows the robot's root body, so a walker stays in the picture
-            camera = {"type": 2, "trackbodyid": 1, "distance": 3.5, "elevation": -15.0,
-                      "lookat": np.array([0.0, 0.0, 1.0])}
+            camera = {
+                "type": 2,
+                "trackbodyid": 1,
+                "distance": 3.5,
+                "elevation": -15.0,
+                "lookat": np.array([0.0, 0.0, 1.0]),
+            }
             extra.update(width=size, height=size, default_camera_config=camera)
         env = gym.make(env_id, disable_env_checker=True, **extra)
     except Exception as error:  # a missing extra (e.g. mujoco) or a broken registration

@@ -11,8 +11,9 @@ from minippo.envs import make_env
 from minippo.errors import MinippoError
 
 
-def evaluate(run_dir, episodes: int = 10, seed: int = 0, gif=None, max_frames: int = 300, frame_skip: int = 2,
-             size: int = 320):
+def evaluate(
+    run_dir, episodes: int = 10, seed: int = 0, gif=None, max_frames: int = 300, frame_skip: int = 2, size: int = 320
+):
     """Return the list of episode returns of the policy saved in ``run_dir`` (or a policy.npz path)."""
     path = Path(run_dir)
     if path.is_dir():
@@ -21,6 +22,14 @@ def evaluate(run_dir, episodes: int = 10, seed: int = 0, gif=None, max_frames: i
         raise MinippoError(f"--episodes must be at least 1, not {episodes}")
     agent, normalizer, meta = load_policy(path)
     env = make_env(meta["env_id"], render_mode="rgb_array" if gif else None, size=size if gif else None)
+    if gif:
+        try:
+            env.reset(seed=seed)
+            env.render()
+        except Exception as error:  # e.g. a renderer's package missing (gymnasium's DependencyNotInstalled)
+            env.close()
+            reason = str(error).splitlines()[0] if str(error) else type(error).__name__
+            raise MinippoError(f"--gif: {meta['env_id']} cannot render here ({reason})")
     frames, returns = [], []
     for episode in range(episodes):
         obs, _ = env.reset(seed=seed + episode)

@@ -102,6 +102,8 @@ def test_existing_out_is_refused_and_kept(trained_run):
         (["train", "CartPole-v1", "--steps", "100", "--out", "{tmp}/x", "--resume"], ["no checkpoint"]),
         (["eval", "{tmp}/nothing-here"], ["no policy"]),
         (["eval", "{tmp}/corrupt", "--episodes", "2"], ["corrupted"]),
+        (["eval", "{tmp}/garbage.npz"], ["corrupted", "not an .npz archive"]),
+        (["train", "hopper-v5", "--steps", "100", "--out", "{tmp}/x"], ["did you mean Hopper-v5"]),
         (["plot", "{tmp}/nothing-here", "--out", "{tmp}/p.png"], ["no run folder"]),
         (["dance"], ["invalid choice"]),
     ],
@@ -109,8 +111,62 @@ def test_existing_out_is_refused_and_kept(trained_run):
 def test_bad_input_gets_one_line_and_a_nonzero_exit(tmp_path, args, fragments):
     (tmp_path / "corrupt").mkdir()
     (tmp_path / "corrupt" / "policy.npz").write_bytes(b"PK\x03\x04 this is not a zip archive")
+    (tmp_path / "garbage.npz").write_bytes(b"garbage")  # NumPy reads this as a pickle, and advises allow_pickle
     result = run(*[a.replace("{tmp}", str(tmp_path)) for a in args])
     assert_one_line_error(result, *fragments)
+    assert "allow_pickle" not in result.stderr
+
+
+def test_an_id_like_nothing_gets_no_guess(tmp_path):
+    result = run("train", "ALE/Pong-v5", "--steps", "100", "--out", str(tmp_path / "x"))
+    assert_one_line_error(result, "unknown environment id 'ALE/Pong-v5'")
+    assert "did you mean" not in result.stderr
+
+
+@pytest.mark.parametrize(
+    "command, phrases",
+    [
+        ("train", ["env_id", "a Gymnasium id", "--steps", "environment steps to train", "--seed", "(default: 1)",
+                   "--out", "the run folder", "(default: clip)"]),
+        ("eval", ["a run folder", "episodes to run", "(default: 10)", "(default: 0)", "--gif"]),
+        ("plot", ["run folders", "the PNG to write", "the figure's title"]),
+    ],
+)  # fmt: skip
+def test_every_argument_is_explained_with_its_default(command, phrases):
+    result = run(command, "--help")
+    assert result.returncode == 0, result.stderr
+    text = " ".join(result.stdout.split())  # argparse wraps lines
+    for phrase in phrases:
+        assert phrase in text, phrase
+    assert "(default: None)" not in text
+
+
+def test_steps_that_are_not_whole_batches_are_said(tmp_path):
+    out = tmp_path / "cut"
+    result = run("train", "CartPole-v1", "--steps", "1300", "--out", str(out), "--config", "horizon=512", "epochs=1")
+    assert result.returncode == 0, result.stderr
+    assert "--steps 1,300 is not a multiple of the batch (N·T = 512 steps); training 1,024 steps (2 updates)" in (
+        result.stderr
+    )
+    assert (out / "progress.csv").read_text().splitlines()[-1].split(",")[1] == "1024"
+    # the bar shows one rate, the trainer's steps/s, not tqdm's own count of steps a second beside it
+    assert "steps/s" in result.stderr and "step/s" not in result.stderr.replace("steps/s", "")
+
+
+def test_whole_batches_train_without_a_notice(trained_run):
+    _, result = trained_run
+    assert "not a multiple" not in result.stderr
+
+
+def test_a_cartpole_run_films_a_gif(trained_run, tmp_path):
+    out, _ = trained_run
+    result = run("eval", str(out), "--episodes", "1", "--gif", str(tmp_path / "cartpole.gif"))
+    assert result.returncode == 0, result.stderr
+    assert result.stderr.strip() == ""
+    from PIL import Image
+
+    with Image.open(tmp_path / "cartpole.gif") as gif:
+        assert gif.n_frames > 5
 
 
 class NaNAfter(gym.Env):
