@@ -44,7 +44,8 @@ def _newest_source_mtime() -> float:
 
 @pytest.fixture(scope="session")
 def built_book() -> Path:
-    """The book's HTML, built with ``jupyter-book build book/ -W -n --keep-going`` if it is missing or older than its sources."""
+    """The book's HTML, built with ``jupyter-book build book/ -W -n --keep-going`` if it is missing or older than its
+    sources."""
     index = BOOK_HTML / "index.html"
     if not index.exists() or index.stat().st_mtime < _newest_source_mtime():
         result = subprocess.run(
