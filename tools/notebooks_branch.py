@@ -38,9 +38,11 @@ if not Path("../minippo/__init__.py").exists():
 
 README = """# The executed chapters of minippo's book
 
-Made by the Pages workflow from commit {commit} of {repository}; every push to the default branch replaces this
-branch whole. Colab and Binder open these notebooks from the book's launch buttons. Edit the chapters in `book/*.md`
-on the default branch, never here.
+Made by the Pages workflow from {repository}
+at commit {commit}.
+
+Every push to the default branch replaces this branch whole. Colab and Binder open these notebooks from the book's
+launch buttons. Edit the chapters in `book/*.md` on the default branch, never here.
 """
 
 
