@@ -128,7 +128,7 @@ def test_notebooks_branch_adds_the_setup_cell_and_pins_the_commit(tmp_path):
     compile(setup_source, "setup", "exec")  # the cell is Python
     assert original["outputs"][0]["text"] == ["2\n"]  # the executed outputs stay
     assert (out / "requirements.txt").read_text().splitlines()[0] == f"minippo @ git+https://github.com/someone/minippo@{commit}"
-    assert sorted(p.name for p in out.iterdir()) == ["01-network.ipynb", "README.md", "requirements.txt"]
+    assert sorted(p.name for p in out.iterdir()) == ["01-network.ipynb", "README.md", "requirements.txt", "runtime.txt"]
 
 
 @pytest.mark.parametrize("argv, message", [

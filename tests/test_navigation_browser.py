@@ -168,3 +168,63 @@ def test_desktop_menu_button_collapses_and_restores_the_sidebar(driver, site):
     buttons[0].click()
     wait_for(lambda: chapter_link(driver, TARGET)["shown"], "the sidebar to come back")
     assert severe_messages(driver) == []
+
+
+def test_dark_mode_keeps_the_figures_and_the_explorer_readable(driver, site):
+    """The theme switch turns the page dark; the figures keep their own opaque light background (a transparent
+    PNG would put black axis labels on the dark page) and the explorer's text keeps its contrast."""
+    from selenium.webdriver.common.by import By
+
+    open_page(driver, site + "05-clipping.html", DESKTOP, mobile=False)
+    driver.execute_script("localStorage.clear()")
+    open_page(driver, site + "05-clipping.html", DESKTOP, mobile=False)
+    switch = [b for b in driver.find_elements(By.CSS_SELECTOR, ".theme-switch-button") if b.is_displayed()][0]
+    for _ in range(3):
+        if driver.execute_script("return document.documentElement.dataset.theme") == "dark":
+            break
+        switch.click()
+    assert driver.execute_script("return document.documentElement.dataset.theme") == "dark"
+
+    page_background, figures = driver.execute_script(
+        """
+        const rgb = (el) => getComputedStyle(el).backgroundColor;
+        const figures = [...document.querySelectorAll("article img[src*='_images/']")].map((img) => {
+            const canvas = document.createElement("canvas");
+            canvas.width = img.naturalWidth; canvas.height = img.naturalHeight;
+            const context = canvas.getContext("2d");
+            context.drawImage(img, 0, 0);
+            const corner = context.getImageData(1, 1, 1, 1).data;
+            return [img.getAttribute("src"), [...corner]];
+        });
+        return [rgb(document.body), figures];
+        """
+    )
+    assert luminance(page_background) < 0.1, f"the page is not dark: {page_background}"
+    assert figures, "no figures on the page"
+    for src, (red, green, blue, alpha) in figures:
+        assert alpha == 255 and min(red, green, blue) > 200, f"{src} is not drawn on an opaque light background"
+
+    text, background = driver.execute_script(
+        """
+        const root = document.querySelector("div.corridor-explorer");
+        let el = root;
+        while (el && ["rgba(0, 0, 0, 0)", "transparent"].includes(getComputedStyle(el).backgroundColor)) {
+            el = el.parentElement;
+        }
+        return [getComputedStyle(root.querySelector(".ce-value") || root).color, getComputedStyle(el).backgroundColor];
+        """
+    )
+    assert contrast(text, background) >= 4.5, (text, background)
+    assert severe_messages(driver) == []
+
+
+def luminance(css_color: str) -> float:
+    """WCAG relative luminance of an ``rgb(...)`` or ``rgba(...)`` colour."""
+    channels = [float(v) / 255 for v in css_color[css_color.index("(") + 1 : -1].split(",")[:3]]
+    linear = [c / 12.92 if c <= 0.03928 else ((c + 0.055) / 1.055) ** 2.4 for c in channels]
+    return 0.2126 * linear[0] + 0.7152 * linear[1] + 0.0722 * linear[2]
+
+
+def contrast(first: str, second: str) -> float:
+    light, dark = sorted((luminance(first), luminance(second)), reverse=True)
+    return (light + 0.05) / (dark + 0.05)

@@ -4,7 +4,8 @@ The chapters are MyST Markdown; Colab and Binder open notebooks from a repositor
 chapter executed (``_sources/NAME.ipynb``, the download menu's file). This copies them to OUT with one cell added at
 the top that, outside a clone of the repository, fetches minippo at the commit the site was built from, installs it
 and moves into its ``book/`` folder (the chapters read benchmark records from there). OUT also gets a
-``requirements.txt`` for Binder and a README. The Pages workflow commits OUT as the whole of the `notebooks` branch.
+``requirements.txt`` and ``runtime.txt`` for Binder, and a README. The Pages workflow commits OUT as the whole of
+the `notebooks` branch.
 
     python tools/notebooks_branch.py book/_build/html book/_build/notebooks \\
         --repository https://github.com/someone/minippo --commit 0123abc...
@@ -64,6 +65,7 @@ def write_branch(html: Path, out: Path, repository: str, commit: str) -> list[st
         notebook["cells"].insert(0, setup_cell(repository, commit))
         (out / path.name).write_text(json.dumps(notebook, indent=1, ensure_ascii=False) + "\n", encoding="utf-8")
     (out / "requirements.txt").write_text(f"minippo @ git+{repository}@{commit}\nmyst-nb\n", encoding="utf-8")
+    (out / "runtime.txt").write_text("python-3.11\n", encoding="utf-8")  # Binder's Python, the one CI tests
     (out / "README.md").write_text(README.format(repository=repository, commit=commit), encoding="utf-8")
     return [path.name for path in notebooks]
 
