@@ -183,6 +183,7 @@ def test_chapter_offers_downloads_launches_and_repository_links(built_book, name
 def test_pages_carry_icon_logo_preview_and_build_footer(built_book):
     page = (built_book / "05-clipping.html").read_text(encoding="utf-8")
     assert re.search(r'<link rel="icon" href="_static/favicon\.svg"', page)
+    assert '<link rel="apple-touch-icon" href="_static/apple-touch-icon.png" />' in page
     assert "_static/logo.svg" in page and "_static/logo-dark.svg" in page
     assert re.search(r'<meta property="og:title" content="Clipping the objective · [^"]+"', page)
     description = re.search(r'<meta property="og:description" content="([^"]{40,})"', page)

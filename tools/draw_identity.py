@@ -1,4 +1,4 @@
-"""Draws the book's logo, favicon and link-preview card into book/_static/ (run it again after changing a shape).
+"""Draws the book's logo, icons and link-preview card into book/_static/ (run it again after changing a shape).
 
 The mark is PPO's clipped objective for a positive advantage: L^CLIP rises with the probability ratio r until
 r = 1 + ε and then stays flat, while the unclipped objective (faded) would keep rising. The same points make the
@@ -60,29 +60,43 @@ def logo(text: str, background: str) -> str:
     )
 
 
-def share_card(path: Path):
-    """1200 × 630, the size link previews use."""
-    fig = plt.figure(figsize=(12, 6.3), dpi=100)
-    fig.patch.set_facecolor(INK)
-    ax = fig.add_axes([0.06, 0.2, 0.6 * 630 / 1200, 0.6])  # a square on the left
+def draw_mark(ax, scale: float = 1.0):
+    """The mark on matplotlib axes spanning the 64 × 64 box; ``scale`` thickens the lines for a large picture."""
     ax.set_xlim(0, 64)
     ax.set_ylim(64, 0)
     ax.set_aspect("equal")
     ax.axis("off")
     ax.add_patch(FancyBboxPatch((1, 1), 62, 62, boxstyle="round,pad=0,rounding_size=13", color="#214a73"))
     xs, ys = zip(*BASE)
-    ax.plot(xs, ys, color=FAINT, lw=4, solid_capstyle="round")
+    ax.plot(xs, ys, color=FAINT, lw=4 * scale, solid_capstyle="round")
     xs, ys = zip(*UNCLIPPED)
-    ax.plot(xs, ys, color=FAINT, lw=7, ls=(0, (1.6, 1.6)), dash_capstyle="round")
-    ax.plot([38, 38], [22, 54], color=FAINT, lw=3, ls=(0, (1.5, 1.5)))
+    ax.plot(xs, ys, color=FAINT, lw=7 * scale, ls=(0, (1.6, 1.6)), dash_capstyle="round")
+    ax.plot([38, 38], [22, 54], color=FAINT, lw=3 * scale, ls=(0, (1.5, 1.5)))
     xs, ys = zip(*(RISE + FLAT[1:]))
-    ax.plot(xs, ys, color=PAPER, lw=11, solid_capstyle="round", solid_joinstyle="round")
-    ax.plot(*OLD, "o", color=ACCENT, ms=20)
+    ax.plot(xs, ys, color=PAPER, lw=11 * scale, solid_capstyle="round", solid_joinstyle="round")
+    ax.plot(*OLD, "o", color=ACCENT, ms=20 * scale)
+
+
+def share_card(path: Path):
+    """1200 × 630, the size link previews use."""
+    fig = plt.figure(figsize=(12, 6.3), dpi=100)
+    fig.patch.set_facecolor(INK)
+    draw_mark(fig.add_axes([0.06, 0.2, 0.6 * 630 / 1200, 0.6]))  # a square on the left
     fig.text(0.43, 0.56, "minippo", color=PAPER, fontsize=88, fontweight="bold", va="baseline")
     fig.text(0.435, 0.43, "Proximal Policy Optimization built", color=PAPER, fontsize=26, va="baseline")
     fig.text(0.435, 0.365, "from scratch in NumPy", color=PAPER, fontsize=26, va="baseline")
     fig.text(0.435, 0.26, "one idea a chapter, every gradient by hand", color=FAINT, fontsize=20, va="baseline")
     fig.savefig(path, facecolor=INK, metadata={"Software": None})
+    plt.close(fig)
+
+
+def touch_icon(path: Path):
+    """180 × 180 on an opaque square: the icon phones put on the home screen (they round the corners)."""
+    fig = plt.figure(figsize=(1.8, 1.8), dpi=100)
+    fig.patch.set_facecolor("#214a73")
+    ax = fig.add_axes([-0.02, -0.02, 1.04, 1.04])
+    draw_mark(ax, scale=0.45)
+    fig.savefig(path, facecolor="#214a73", metadata={"Software": None})
     plt.close(fig)
 
 
@@ -92,7 +106,8 @@ def main():
     (STATIC / "logo.svg").write_text(logo(INK, INK), encoding="utf-8")
     (STATIC / "logo-dark.svg").write_text(logo("#e6edf5", "#214a73"), encoding="utf-8")
     share_card(STATIC / "share-card.png")
-    print("wrote favicon.svg, logo.svg, logo-dark.svg and share-card.png in", STATIC)
+    touch_icon(STATIC / "apple-touch-icon.png")
+    print("wrote favicon.svg, logo.svg, logo-dark.svg, share-card.png and apple-touch-icon.png in", STATIC)
 
 
 if __name__ == "__main__":

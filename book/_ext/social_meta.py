@@ -3,7 +3,7 @@
 Each page gets ``<meta name="description">`` and ``og:title``, ``og:description``, ``og:type``, ``og:site_name``;
 when the site's address is known (``html_baseurl``, set by the Pages workflow through ``BOOK_SITE_URL``), also
 ``og:url`` and ``og:image``, which must be absolute. The description is the page's first paragraph, cut at a word
-near 200 characters.
+near 200 characters. Every page also names the icon phones use for a link on the home screen.
 """
 
 import re
@@ -12,6 +12,7 @@ from html import escape
 from docutils import nodes
 
 IMAGE = "_static/share-card.png"  # 1200 × 630, drawn by tools/draw_identity.py
+TOUCH_ICON = "_static/apple-touch-icon.png"  # 180 × 180, the icon a phone puts on its home screen
 LENGTH = 200
 
 
@@ -53,6 +54,7 @@ def _add_meta(app, pagename, templatename, context, doctree):
         tags += _meta("property", "og:image", base + IMAGE)
         tags += _meta("property", "og:image:alt", "The minippo logo, PPO's clipped objective, beside the title")
         tags += _meta("name", "twitter:card", "summary_large_image")
+    tags += f'<link rel="apple-touch-icon" href="{escape(context["pathto"](TOUCH_ICON, 1), quote=True)}" />\n'
     context["metatags"] = context.get("metatags", "") + tags
 
 
