@@ -43,7 +43,7 @@ def parse(path):
 
 def test_the_toc_names_the_course():
     assert CHAPTERS[:2] == ["intro", "notation"]
-    assert len(NUMBERED) == 11
+    assert len(NUMBERED) >= 12
 
 
 @pytest.mark.timeout(1800)
@@ -53,7 +53,7 @@ def test_every_page_is_built_and_substantial(built_book, name):
     assert page.exists(), f"{name}.html is missing from the built book"
     text, classes, _ = parse(page)
     words = len(text.split())
-    assert words > (300 if name in ("intro", "notation") else 1200), f"{name} has only {words} words"
+    assert words > (300 if name in ("intro", "notation", "references") else 1200), f"{name} has only {words} words"
 
 
 @pytest.mark.timeout(1800)

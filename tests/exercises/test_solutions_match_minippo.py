@@ -14,6 +14,8 @@ from minippo.network import MLP, linear_backward, tanh_backward
 from minippo.optimizer import Adam
 from minippo.ppo import Config, update_minibatch
 from minippo.ppo import loss_and_grad as minippo_loss_and_grad
+from minippo.reward_model import bradley_terry_loss
+from minippo.rlhf import kl_shaped_rewards
 from solutions import (
     ch01_network,
     ch02_distributions,
@@ -25,6 +27,7 @@ from solutions import (
     ch08_shared_network,
     ch09_kl_penalty,
     ch10_ppo_update,
+    ch12_language_model,
 )
 
 pytestmark = pytest.mark.timeout(60)
@@ -210,3 +213,14 @@ def test_ppo_loss_and_update(seed, kind):
             update_minibatch(twin, twin_adam, {key: value[index] for key, value in minibatch.items()}, config)
     assert steps == config.epochs * 2
     same(agent.params, twin.params, rtol=1e-9)
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_language_model(seed):
+    rng = np.random.default_rng(seed)
+    preferred, rejected = rng.normal(0, 3, 9), rng.normal(0, 3, 9)
+    same(ch12_language_model.bradley_terry_loss(preferred, rejected), bradley_terry_loss(preferred, rejected))
+    logp, logp_ref = rng.normal(-1.5, 0.5, (4, 6)), rng.normal(-1.5, 0.5, (4, 6))
+    scores, lengths = rng.normal(size=4), rng.integers(1, 7, 4)
+    same(ch12_language_model.kl_shaped_rewards(logp, logp_ref, scores, lengths, 0.4),
+         kl_shaped_rewards(logp, logp_ref, scores, lengths, 0.4))

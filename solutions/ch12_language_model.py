@@ -1,0 +1,41 @@
+"""Chapter 12: PPO for a language model in miniature. Two pieces of RLHF: the Bradley–Terry loss that fits a reward
+model to preferences, and the per-token reward that PPO maximises, the score at the end minus β times the log-ratio
+to the frozen pretrained model at every token.
+
+Bradley–Terry: P(w ≻ l) = σ(r_w − r_l), so the loss of a batch of n pairs is L = −(1/n) Σ log σ(r_w − r_l).
+
+Grade: ``minippo grade 12``
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+EXERCISES = ["bradley_terry_loss", "kl_shaped_rewards"]
+
+
+def bradley_terry_loss(scores_preferred: np.ndarray, scores_rejected: np.ndarray):
+    """L = −Ê[log σ(r_w − r_l)] over n pairs, and its gradient with respect to both scores.
+
+    scores_preferred (r_w), scores_rejected (r_l): (n,).  Returns (loss, grad_preferred, grad_rejected): loss a float;
+    grad_preferred = ∂L/∂r_w = −σ(−Δ)/n and grad_rejected = ∂L/∂r_l = +σ(−Δ)/n, both (n,), with Δ = r_w − r_l.
+    Finite for margins of ±1000: −log σ(Δ) = log(1 + e^{−Δ}) is np.logaddexp(0, −Δ).
+    """
+    n = len(scores_preferred)
+    margin = scores_preferred - scores_rejected
+    loss = float(np.logaddexp(0.0, -margin).sum()) / n
+    wrong = np.exp(-np.logaddexp(0.0, margin))  # σ(−Δ)
+    return loss, -wrong / n, wrong / n
+
+
+def kl_shaped_rewards(logp, logp_ref, scores, lengths, beta: float) -> np.ndarray:
+    """The reward of every generated token: r_t = −β (log π(a_t|s_t) − log π_ref(a_t|s_t)) for t < length, plus the
+    sequence's score R(x) on its last token t = length − 1, and 0 for the padding after the end.
+
+    logp, logp_ref: (n, T) log-probabilities of the tokens under the policy that sampled them and under the frozen
+    reference.  scores: (n,) the reward model's scores.  lengths: (n,) integers in 1 … T.  Returns (n, T).
+    """
+    steps = np.arange(logp.shape[1])[None, :]
+    inside = steps < lengths[:, None]
+    rewards = np.where(inside, -beta * (logp - logp_ref), 0.0)
+    return rewards + np.where(steps == lengths[:, None] - 1, scores[:, None], 0.0)

@@ -1,0 +1,99 @@
+"""Plausible mistakes in chapter 12: the Bradley–Terry loss and its gradient, and the KL-shaped per-token reward."""
+
+import numpy as np
+
+
+def bt_reversed(scores_preferred, scores_rejected):
+    """−log σ(r_l − r_w): prefers the rejected answer."""
+    n, margin = len(scores_preferred), scores_rejected - scores_preferred
+    wrong = np.exp(-np.logaddexp(0.0, margin))
+    return float(np.logaddexp(0.0, -margin).sum()) / n, wrong / n, -wrong / n
+
+
+def bt_log_of_sigmoid(scores_preferred, scores_rejected):
+    """log(σ(Δ)) computed directly: σ underflows to 0 for a margin of −1000 and the loss is infinite."""
+    n, margin = len(scores_preferred), scores_preferred - scores_rejected
+    with np.errstate(over="ignore", divide="ignore"):
+        sigma = 1.0 / (1.0 + np.exp(-margin))
+        loss = -float(np.log(sigma).sum()) / n
+    return loss, -(1.0 - sigma) / n, (1.0 - sigma) / n
+
+
+def bt_gradient_with_sigma_of_margin(scores_preferred, scores_rejected):
+    """∂L/∂r_w = −σ(Δ)/n: the probability of the right answer where that of the wrong one belongs."""
+    n, margin = len(scores_preferred), scores_preferred - scores_rejected
+    right = np.exp(-np.logaddexp(0.0, -margin))
+    return float(np.logaddexp(0.0, -margin).sum()) / n, -right / n, right / n
+
+
+def bt_gradient_not_averaged(scores_preferred, scores_rejected):
+    """The gradient of the sum, not of the mean."""
+    n, margin = len(scores_preferred), scores_preferred - scores_rejected
+    wrong = np.exp(-np.logaddexp(0.0, margin))
+    return float(np.logaddexp(0.0, -margin).sum()) / n, -wrong, wrong
+
+
+def bt_gradient_on_preferred_only(scores_preferred, scores_rejected):
+    """Forgets that the rejected score is a variable too."""
+    n, margin = len(scores_preferred), scores_preferred - scores_rejected
+    wrong = np.exp(-np.logaddexp(0.0, margin))
+    return float(np.logaddexp(0.0, -margin).sum()) / n, -wrong / n, np.zeros(n)
+
+
+def _inside(logp, lengths):
+    return np.arange(logp.shape[1])[None, :] < lengths[:, None]
+
+
+def _last(logp, lengths):
+    return np.arange(logp.shape[1])[None, :] == lengths[:, None] - 1
+
+
+def rewards_kl_sign(logp, logp_ref, scores, lengths, beta):
+    """+β (log π − log π_ref): pays the policy for moving away from the reference."""
+    rewards = np.where(_inside(logp, lengths), beta * (logp - logp_ref), 0.0)
+    return rewards + np.where(_last(logp, lengths), scores[:, None], 0.0)
+
+
+def rewards_score_one_step_late(logp, logp_ref, scores, lengths, beta):
+    """The score at t = length, one step after the last token (in the padding, or lost at T)."""
+    steps = np.arange(logp.shape[1])[None, :]
+    rewards = np.where(_inside(logp, lengths), -beta * (logp - logp_ref), 0.0)
+    return rewards + np.where(steps == lengths[:, None], scores[:, None], 0.0)
+
+
+def rewards_score_on_every_token(logp, logp_ref, scores, lengths, beta):
+    """The score added at every token of the sequence instead of once at its end."""
+    inside = _inside(logp, lengths)
+    return np.where(inside, -beta * (logp - logp_ref) + scores[:, None], 0.0)
+
+
+def rewards_penalty_on_padding(logp, logp_ref, scores, lengths, beta):
+    """Charges the KL on the padding after the end too."""
+    return -beta * (logp - logp_ref) + np.where(_last(logp, lengths), scores[:, None], 0.0)
+
+
+def rewards_beta_on_the_score(logp, logp_ref, scores, lengths, beta):
+    """−β (log π − log π_ref − R): the score scaled by β as well."""
+    rewards = np.where(_inside(logp, lengths), -beta * (logp - logp_ref), 0.0)
+    return rewards + np.where(_last(logp, lengths), beta * scores[:, None], 0.0)
+
+
+def rewards_kl_at_the_end(logp, logp_ref, scores, lengths, beta):
+    """The whole sequence's penalty −β Σ_t log π/π_ref paid at the last token only."""
+    total = np.where(_inside(logp, lengths), logp - logp_ref, 0.0).sum(axis=1)
+    return np.where(_last(logp, lengths), (scores - beta * total)[:, None], 0.0)
+
+
+VARIANTS = {
+    "bt_reversed": {"bradley_terry_loss": bt_reversed},
+    "bt_log_of_sigmoid": {"bradley_terry_loss": bt_log_of_sigmoid},
+    "bt_gradient_with_sigma_of_margin": {"bradley_terry_loss": bt_gradient_with_sigma_of_margin},
+    "bt_gradient_not_averaged": {"bradley_terry_loss": bt_gradient_not_averaged},
+    "bt_gradient_on_preferred_only": {"bradley_terry_loss": bt_gradient_on_preferred_only},
+    "rewards_kl_sign": {"kl_shaped_rewards": rewards_kl_sign},
+    "rewards_score_one_step_late": {"kl_shaped_rewards": rewards_score_one_step_late},
+    "rewards_score_on_every_token": {"kl_shaped_rewards": rewards_score_on_every_token},
+    "rewards_penalty_on_padding": {"kl_shaped_rewards": rewards_penalty_on_padding},
+    "rewards_beta_on_the_score": {"kl_shaped_rewards": rewards_beta_on_the_score},
+    "rewards_kl_at_the_end": {"kl_shaped_rewards": rewards_kl_at_the_end},
+}

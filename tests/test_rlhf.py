@@ -1,0 +1,150 @@
+"""The language model in miniature: its grammar, the gradients of its pretraining and of the Bradley–Terry reward
+model (central differences in float64), the KL-shaped rewards, and PPO on tokens learning with a bounded KL."""
+
+import numpy as np
+import pytest
+from conftest import assert_close, numerical_gradient
+
+from minippo import language as lm
+from minippo.reward_model import RewardModel, bradley_terry_loss, rater_score, token_counts
+from minippo.rlhf import (
+    RLHFConfig,
+    kl_shaped_rewards,
+    pretrained_pieces,
+    token_advantages,
+    train_rlhf,
+)
+
+
+def test_the_grammar_writes_well_formed_sentences_and_the_checker_rejects_others(rng):
+    for _ in range(200):
+        assert lm.is_well_formed(lm.sample_sentence(rng))
+    for bad in ("the cat is good good .", "the cat is good", "cat the is good .", "the cat is good and .",
+                "the cat is very .", "the cat is good bad .", "the cat is good . ."):
+        assert not lm.is_well_formed(bad.split()), bad
+    assert lm.is_well_formed("my day was very good and bad but very new and old .".split())
+
+
+def test_the_rater_counts_words_and_ranks_ill_formed_sentences_last():
+    assert rater_score("the cat is good and great but sad .".split()) == 1.0
+    assert rater_score("the cat is bad and sad but poor and dull and awful .".split()) == -5.0
+    assert rater_score("the cat is good good good .".split()) < -5.0
+
+
+def test_prefix_features_describe_the_prefix():
+    tokens = lm.encode("the cat is good .".split())[None, :]
+    obs = lm.prefix_features(tokens, 3)  # predicting "good" after "the cat is"
+    V, W = lm.V, lm.WINDOW
+    window = obs[0, : W * V].reshape(W, V)
+    assert [lm.VOCAB[i] for i in window.argmax(axis=1)] == ["is", "cat", "the"]
+    counts = obs[0, W * V : W * V + V]
+    assert counts.sum() == 3 and counts[lm.TOKEN["cat"]] == 1
+    assert obs[0, W * V + V + 3] == 1 and obs[0, W * V + V :].sum() == 1
+    first = lm.prefix_features(tokens, 0)[0, : W * V].reshape(W, V)
+    assert np.all(first.argmax(axis=1) == lm.TOKEN[lm.BOS])
+
+
+def test_pretraining_gradient_matches_finite_differences(rng):
+    model = lm.new_language_model(rng, hidden=8)
+    model.params[...] += 0.3 * rng.standard_normal(model.params.shape)  # move the output layer off its 0.01 scale
+    tokens, lengths = lm.make_corpus(4, rng)
+    obs = lm.sequence_features(tokens)[:, :5].reshape(-1, lm.OBS_DIM)
+    targets = tokens[:, :5].reshape(-1)
+    lm.nll_and_grad(model, obs, targets)
+    analytic = model.nets["policy"].grads.copy()
+    policy = model.nets["policy"]
+    grads_scratch = model.grads.copy()
+    numeric = numerical_gradient(lambda: lm.nll_and_grad(model, obs, targets), policy.params)
+    model.grads[...] = grads_scratch
+    assert_close(analytic, numeric, rtol=1e-6, atol=1e-8)
+
+
+def test_bradley_terry_gradient_matches_finite_differences(rng):
+    preferred, rejected = rng.normal(0, 2, 7), rng.normal(0, 2, 7)
+    loss, grad_w, grad_l = bradley_terry_loss(preferred, rejected)
+    assert_close(grad_w, numerical_gradient(lambda: bradley_terry_loss(preferred, rejected)[0], preferred))
+    assert_close(grad_l, numerical_gradient(lambda: bradley_terry_loss(preferred, rejected)[0], rejected))
+    assert np.isclose(loss, np.mean(np.log1p(np.exp(-(preferred - rejected)))))
+
+
+def test_bradley_terry_loss_is_finite_for_huge_margins():
+    loss, grad_w, grad_l = bradley_terry_loss(np.array([1000.0, -1000.0]), np.array([0.0, 0.0]))
+    assert np.isclose(loss, 500.0) and np.allclose(grad_w, [0.0, -0.5]) and np.allclose(grad_l, [0.0, 0.5])
+
+
+def test_reward_model_gradient_matches_finite_differences(rng):
+    model = RewardModel(l2=0.1)
+    model.weights[...] = rng.standard_normal(lm.V)
+    counts_w = token_counts(*lm.make_corpus(6, rng))
+    counts_l = token_counts(*lm.make_corpus(6, rng))
+    _, analytic = model.loss_and_grad(counts_w, counts_l)
+    numeric = numerical_gradient(lambda: model.loss_and_grad(counts_w, counts_l)[0], model.weights)
+    assert_close(analytic, numeric)
+
+
+def test_kl_shaped_rewards_by_hand():
+    logp = np.log(np.array([[0.5, 0.5, 0.5], [0.2, 0.2, 0.2]]))
+    logp_ref = np.log(np.array([[0.25, 0.5, 0.9], [0.4, 0.4, 0.4]]))
+    rewards = kl_shaped_rewards(logp, logp_ref, np.array([3.0, -1.0]), np.array([2, 3]), beta=0.5)
+    expected = np.array([[-0.5 * np.log(2), 3.0, 0.0], [0.5 * np.log(2), 0.5 * np.log(2), 0.5 * np.log(2) - 1.0]])
+    assert_close(rewards, expected)
+
+
+def test_token_advantages_restart_at_each_sequence_end():
+    batch = {"rewards": np.array([[0.0, 2.0, 5.0], [0.0, 0.0, 1.0]]), "values": np.zeros((2, 3)),
+             "lengths": np.array([2, 3])}
+    advantages, returns = token_advantages(batch, gamma=1.0, lam=1.0)
+    assert_close(advantages, [[2.0, 2.0, 5.0], [1.0, 1.0, 1.0]])  # the 5 after the first sequence's end stays out
+    assert_close(returns, advantages)
+
+
+@pytest.fixture(scope="module")
+def pieces():
+    return pretrained_pieces(seed=0, corpus_size=1500, pairs=1500, hidden=64, epochs=8)
+
+
+def test_pretraining_learns_the_grammar_and_the_reward_model_the_rule(pieces):
+    model, reward_model, record = pieces
+    assert record["pretrain_losses"][-1] < record["pretrain_losses"][0] - 0.2
+    tokens, lengths = lm.generate(model, 300, np.random.default_rng(1))
+    well_formed = np.mean([lm.is_well_formed([lm.VOCAB[t] for t in row[:n]]) for row, n in zip(tokens, lengths)])
+    assert well_formed > 0.85, well_formed
+    weights = dict(zip(lm.VOCAB, reward_model.weights))
+    assert min(weights[w] for w in lm.POSITIVE) > 0.5 and max(weights[w] for w in lm.NEGATIVE) < -0.5
+    assert max(abs(weights[w]) for w in lm.NEUTRAL + lm.NOUNS) < 0.35
+    assert record["held_out_accuracy"] > 0.65
+
+
+@pytest.mark.timeout(300)
+def test_ppo_on_tokens_raises_the_reward_with_a_bounded_kl_and_hacks_it_without_the_penalty(pieces):
+    model, reward_model, _ = pieces
+    before = model.params.copy()
+    _, penalised = train_rlhf(model, reward_model, RLHFConfig(seed=0, beta=0.5, updates=40))
+    _, free = train_rlhf(model, reward_model, RLHFConfig(seed=0, beta=0.0, updates=40))
+    assert np.array_equal(model.params, before), "the reference policy must stay frozen"
+    start = np.mean([s["score"] for s in penalised[:3]])
+    end = {name: {k: np.mean([s[k] for s in run[-5:]]) for k in run[0]} for name, run in
+           (("penalised", penalised), ("free", free))}
+    assert end["penalised"]["score"] > start + 1.0
+    assert end["penalised"]["kl_to_reference"] < 4.0
+    assert end["penalised"]["well_formed"] > 0.7
+    assert end["free"]["score"] > end["penalised"]["score"] + 5.0  # the reward model's score runs away ...
+    assert end["free"]["well_formed"] < 0.2  # ... on text the rater calls broken
+    assert end["free"]["kl_to_reference"] > 5 * end["penalised"]["kl_to_reference"]
+
+
+def test_the_pretrained_pieces_are_the_same_for_the_same_seed():
+    first = pretrained_pieces(seed=5, corpus_size=200, pairs=100, hidden=16, epochs=2)
+    second = pretrained_pieces(seed=5, corpus_size=200, pairs=100, hidden=16, epochs=2)
+    assert np.array_equal(first[0].params, second[0].params) and np.array_equal(first[1].weights, second[1].weights)
+    assert first[2] == second[2]
+
+
+def test_the_same_seed_gives_the_same_run_bitwise(pieces):
+    model, reward_model, _ = pieces
+    config = RLHFConfig(seed=3, beta=0.2, updates=2, sequences=16)
+    first, runs = train_rlhf(model, reward_model, config)
+    second, again = train_rlhf(model, reward_model, config)
+    assert np.array_equal(first.params, second.params) and runs == again
+    assert not np.array_equal(first.params, train_rlhf(model, reward_model, RLHFConfig(seed=4, beta=0.2, updates=2,
+                                                                                      sequences=16))[0].params)
