@@ -1,6 +1,6 @@
 """A multilayer perceptron written by hand: linear and tanh layers, forward and backward side by side.
 
-The parameters of a network live in one flat float64 vector; each layer's weight ``W`` and bias ``b`` are views
+The parameters of a network live in one flat vector; each layer's weight ``W`` and bias ``b`` are views
 into it, and the gradients live in a second flat vector of the same shape. One flat vector lets Adam and the
 global gradient-norm clip work on all parameters at once, in a handful of NumPy calls.
 """
@@ -28,10 +28,7 @@ def orthogonal(shape: tuple[int, int], gain: float, rng: np.random.Generator) ->
 
 
 def linear_forward(x: np.ndarray, W: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """y = x W + b, for a batch x of shape (n, in).
-
-    ``x.dot(W)`` is ``x @ W``; on the rollout's one-row inputs its call costs half as much (0.7 µs against 1.4).
-    """
+    """y = x W + b, for a batch x of shape (n, in): one row per sample."""
     return x.dot(W) + b
 
 
@@ -44,21 +41,8 @@ def linear_backward(x: np.ndarray, W: np.ndarray, grad_y: np.ndarray, need_grad_
 
 
 def tanh_forward(z: np.ndarray) -> np.ndarray:
-    """h = tanh(z). In float64 it is computed as 1 − 2/(e^{2z} + 1).
-
-    In float64 that is the same function to within 4e-16, and NumPy's vectorised exp is about twice as fast as its
-    tanh (a minibatch of 64 × 64: 31 µs against 56 µs); e^{2z} = inf gives 1 and e^{2z} = 0 gives −1. In float32,
-    the training default, np.tanh itself is as fast (11 µs against 13 µs) and has no overhead on the one-row
-    forward passes of the rollout (0.7 µs against 6 µs), so it is used as it is.
-    """
-    if z.dtype != np.float64:
-        return np.tanh(z)
-    with np.errstate(over="ignore"):
-        h = np.exp(2.0 * z)
-    h += 1.0
-    np.divide(2.0, h, out=h)
-    np.subtract(1.0, h, out=h)
-    return h
+    """h = tanh(z), elementwise."""
+    return np.tanh(z)
 
 
 def tanh_backward(h: np.ndarray, grad_h: np.ndarray) -> np.ndarray:

@@ -31,7 +31,7 @@ class Adam:
     def step(self, grads: np.ndarray) -> None:
         """One descent step along ``grads`` (the gradient of the loss to minimise)."""
         self.t += 1
-        scratch = self._scratch  # every pass writes into a buffer: no temporary arrays, all in the params' dtype
+        scratch = self._scratch  # one buffer for the intermediate results, in the params' dtype
         self.m *= self.beta1
         self.m += np.multiply(grads, 1.0 - self.beta1, out=scratch)
         self.v *= self.beta2

@@ -296,7 +296,7 @@ def test_clip_preset_holds_the_light_and_the_return_rises(reader):
     reader.pause()
     lights = {sample["light"] for sample in samples}
     assert lights == {"held"}, samples
-    assert not [line for line in reader.log() if "broke the band" in line]  # not even between two samples
+    assert not [line for line in reader.log() if "broke the limit" in line]  # not even between two samples
     ret = reader.returns()[0]
     assert start < 0.0 < ret
     assert ret >= 0.9 * optimal
@@ -312,7 +312,7 @@ def test_no_clip_preset_breaks_the_band(reader):
     broken = reader.step_until(lambda screen: screen["light"] == "broken")
     assert broken["kl"] > broken["limit"]  # the light and the numbers agree
     assert "ce-broken" in broken["light_class"]  # drawn as broken, not only labelled so
-    reader.watch(lambda s: any("broke the band" in line for line in reader.log()), timeout=10)
+    reader.watch(lambda s: any("broke the limit" in line for line in reader.log()), timeout=10)
 
 
 def test_switching_to_clip_mid_run_brings_the_light_back(reader):
@@ -327,7 +327,7 @@ def test_switching_to_clip_mid_run_brings_the_light_back(reader):
     reader.pause()
     later = [sample["light"] for sample in samples if sample["round"] >= switched_in + 2]
     assert later and set(later) == {"held"}, samples
-    broke = [line for line in reader.log() if "broke the band" in line]
+    broke = [line for line in reader.log() if "broke the limit" in line]
     rounds_broken = [int(re.match(r"round (\d+)", line).group(1)) for line in broke]
     assert all(r < switched_in + 2 for r in rounds_broken), broke
     assert reader.light() == "held"

@@ -6,7 +6,8 @@
  * to corridor-math.js (loaded from beside this file), and a test checks that the two play the same trajectory.
  * This file only draws: the playback speed sets how many ticks are played per second, never what a tick does.
  *
- * Optional attributes: data-speed="<ticks per second>" starts at another playback speed.
+ * Optional attributes: data-speed="<ticks per second>" starts at another playback speed; data-objective="clip|cpi|klpen"
+ * starts the preset with another objective (the KL-penalty chapter starts the clip preset on L^KLPEN).
  */
 (function () {
   "use strict";
@@ -56,6 +57,11 @@
     return x.toFixed(digits === undefined ? 3 : digits);
   }
 
+  // β lives on powers of two times its start and may halve far below 0.01: three significant digits, or a power of ten
+  function fmtBeta(beta) {
+    return beta >= 0.01 ? String(Number(beta.toPrecision(3))) : minus(beta.toExponential(1));
+  }
+
   function signed(x, digits) {
     return (x >= 0 ? "+" : "\u2212") + fmt(Math.abs(x), digits);
   }
@@ -85,13 +91,17 @@
     this.speed = speed > 0 ? speed : DEFAULT_SPEED;
     this.presetName = preset;
     this.settings = Object.assign({}, M.DEFAULTS, M.PRESETS[preset]);
+    const objective = root.getAttribute("data-objective");
+    if (M.OBJECTIVES.indexOf(objective) >= 0) this.settings.objective = objective;
     this.selected = 0;
+    this.dragFrom = {}; // a slider's setting when its drag began: the log gets one line when the drag ends
     this.hovered = null;
     this.playing = false;
     this.frame = null;
     this.build();
     this.reset(false);
-    this.log("Preset \u201c" + M.PRESET_TITLES[preset] + "\u201d. Press play, or step one epoch at a time.");
+    const start = objective && this.settings.objective !== M.PRESETS[preset].objective ? ", on " + OBJECTIVE_TEXT[objective] : "";
+    this.log("Preset \u201c" + M.PRESET_TITLES[preset] + "\u201d" + start + ". Press play, or step one epoch at a time.");
     root.setAttribute("data-ready", "true");
   }
 
@@ -251,8 +261,19 @@
     };
     input.addEventListener("input", () => {
       const value = update();
-      if (key === "speed") this.speed = value;
-      else this.change(key, value);
+      if (key === "speed") {
+        this.speed = value;
+        return;
+      }
+      // the math follows every intermediate value of a drag; the log waits for its end ("change")
+      if (!(key in this.dragFrom)) this.dragFrom[key] = this.settings[key];
+      this.change(key, value, false);
+    });
+    input.addEventListener("change", () => {
+      if (!(key in this.dragFrom)) return;
+      const from = this.dragFrom[key];
+      delete this.dragFrom[key];
+      if (from !== this.settings[key]) this.logChange(key, this.settings[key]);
     });
     this.sliders[key] = {
       input: input,
@@ -275,8 +296,9 @@
     for (const y of rows) node.appendChild(svg("line", { x1: t.x0, x2: t.x1, y1: y, y2: y, class: "ce-track-axis" }));
     this.band = svg("rect", { class: "ce-band", y: 24, height: 62, rx: 3 });
     node.appendChild(this.band);
-    this.bandLow = svg("text", { class: "ce-band-label", y: 18, "text-anchor": "middle" });
-    this.bandHigh = svg("text", { class: "ce-band-label", y: 18, "text-anchor": "middle" });
+    // the labels grow outwards from the band's edges, so that they never overlap, however narrow the band
+    this.bandLow = svg("text", { class: "ce-band-label", y: 18, "text-anchor": "end" });
+    this.bandHigh = svg("text", { class: "ce-band-label", y: 18, "text-anchor": "start" });
     node.append(this.bandLow, this.bandHigh);
     const oneX = this.ratioX(1.0);
     node.appendChild(svg("line", { class: "ce-one", x1: oneX, x2: oneX, y1: 24, y2: 86 }));
@@ -369,6 +391,7 @@
     this.lastRoundBroken = false;
     this.brokenRounds = 0;
     this.reached90 = false;
+    this.betaRun = null;
     this.finished = false;
     this.syncControls();
     if (announce) this.log("Reset: round 1 starts again from the uniform policy.");
@@ -394,10 +417,17 @@
     }
   };
 
-  CorridorExplorer.prototype.change = function (key, value) {
+  CorridorExplorer.prototype.change = function (key, value, announce) {
     if (this.settings[key] === value) return;
     this.settings[key] = value;
     this.explorer.set(key, value);
+    if (announce !== false) this.logChange(key, value);
+    this.syncControls();
+    this.record = this.explorer.record();
+    this.render();
+  };
+
+  CorridorExplorer.prototype.logChange = function (key, value) {
     const where = "round " + this.explorer.round + ", epoch " + this.explorer.epoch;
     const words = {
       objective: () => "objective \u2192 " + OBJECTIVE_TEXT[value],
@@ -407,9 +437,6 @@
       noise: () => "advantage noise \u2192 " + fmt(value, 2) + " (from the next round)",
     };
     this.log(where + ": " + words[key]());
-    this.syncControls();
-    this.record = this.explorer.record();
-    this.render();
   };
 
   CorridorExplorer.prototype.select = function (s) {
@@ -469,14 +496,16 @@
           return;
         }
       }
+      const before = this.record;
       const record = ex.tick();
       this.record = record;
+      if (record.objective === "klpen" && record.beta !== before.beta) this.logBeta(before, record);
       this.history.push({ ret: record.return, kl: record.kl });
       if (!record.held && !this.roundBroken) {
         this.roundBroken = true;
         this.brokenRounds += 1;
         this.log(
-          "round " + record.round + ", epoch " + record.epoch + ": KL " + fmt(record.kl, 3) + " broke the band (limit " + fmt(record.kl_limit, 3) + ")"
+          "round " + record.round + ", epoch " + record.epoch + ": KL " + fmt(record.kl, 3) + " broke the limit \u03b5\u00b2 = " + fmt(record.kl_limit, 3)
         );
       }
       if (!this.reached90 && record.return >= 0.9 * ex.optimal) {
@@ -484,6 +513,28 @@
         this.log("round " + record.round + ": return " + fmt(record.return, 3) + " reached 90% of the optimal " + fmt(ex.optimal, 3));
       }
     }
+  };
+
+  // eq. 8's rule acted as a round ended, on the KL d the whole round reached. A run of changes in one direction
+  // is one line of the log, rewritten in place, so that a β halving round after round cannot flood it.
+  CorridorExplorer.prototype.logBeta = function (before, record) {
+    const halves = record.beta < before.beta;
+    const run = this.betaRun;
+    const d = before.kl >= 1e-4 ? fmt(before.kl, 4) : before.kl.toExponential(1);
+    if (run && run.halves === halves && run.last === before.round - 1 && this.logList.firstChild === run.item) {
+      run.last = before.round;
+      run.count += 1;
+      run.item.textContent = minus(
+        "rounds " + run.first + "\u2013" + run.last + ": KL d " + (halves ? "below d_targ/1.5" : "above 1.5 d_targ") +
+          " every round, \u03b2 " + (halves ? "halved " : "doubled ") + run.count + " times to " + fmtBeta(record.beta) +
+          " (last d = " + d + ")"
+      );
+      return;
+    }
+    const item = this.log(
+      "round " + before.round + " ended at KL d = " + d + (halves ? " < d_targ/1.5: \u03b2 halves to " : " > 1.5 d_targ: \u03b2 doubles to ") + fmtBeta(record.beta)
+    );
+    this.betaRun = { halves: halves, first: before.round, last: before.round, count: 1, item: item };
   };
 
   CorridorExplorer.prototype.endOfRound = function () {
@@ -499,6 +550,7 @@
     const item = el("li", { text: minus(text) });
     this.logList.insertBefore(item, this.logList.firstChild);
     while (this.logList.children.length > MAX_LOG) this.logList.removeChild(this.logList.lastChild);
+    return item;
   };
 
   // ---------------------------------------------------------------- drawing
@@ -520,12 +572,13 @@
     const p = this.statusParts;
     p.round.value.textContent = String(ex.round);
     p.epoch.value.textContent = ex.epoch + "/" + ex.settings.epochs;
-    p.kl.value.textContent = fmt(rec.kl, 3) + " (limit " + fmt(rec.kl_limit, 3) + ")";
+    const klDigits = rec.kl_limit < 0.01 ? 4 : 3; // ε = 0.05 puts the limit at 0.0025, which three digits would round
+    p.kl.value.textContent = fmt(rec.kl, klDigits) + " (limit " + fmt(rec.kl_limit, klDigits) + ")";
     p.return.value.textContent = minus(fmt(rec.return, 3)) + " / " + fmt(ex.optimal, 3) + " optimal";
     p.clipped.value.textContent = percent(rec.clip_fraction);
     const clipLabel = ex.settings.objective === "clip" ? "clipped " : "outside band ";
     if (p.clipped.label.textContent !== clipLabel) p.clipped.label.textContent = clipLabel;
-    p.beta.value.textContent = rec.beta >= 0.01 ? fmt(rec.beta, 3) : minus(rec.beta.toExponential(1));
+    p.beta.value.textContent = fmtBeta(rec.beta);
     p.beta.part.hidden = ex.settings.objective !== "klpen";
     this.root.setAttribute("data-round", String(ex.round));
     this.root.setAttribute("data-epoch", String(ex.epoch));
@@ -549,9 +602,9 @@
     this.band.setAttribute("width", (highX - lowX).toFixed(2));
     this.band.setAttribute("data-low", fmt(1 - eps, 2));
     this.band.setAttribute("data-high", fmt(1 + eps, 2));
-    this.bandLow.setAttribute("x", lowX.toFixed(2));
+    this.bandLow.setAttribute("x", (lowX - 1).toFixed(2));
     this.bandLow.textContent = fmt(1 - eps, 2);
-    this.bandHigh.setAttribute("x", highX.toFixed(2));
+    this.bandHigh.setAttribute("x", (highX + 1).toFixed(2));
     this.bandHigh.textContent = fmt(1 + eps, 2);
     this.trackTitle.textContent = "ratio r(\u03b8) against the clip band, state " + STATE_NAMES[shown];
     const trackWords = [];
@@ -637,7 +690,7 @@
     place("optimal", yRet(ex.optimal) + 11, "optimal " + fmt(ex.optimal, 3));
     place("klTop", c.top, fmt(klMax, 2));
     place("klZero", c.bottom, "0");
-    place("limit", yKl(limit) - 5, "KL limit \u03b5\u00b2 = " + fmt(limit, 3));
+    place("limit", yKl(limit) - 5, "KL limit \u03b5\u00b2 = " + fmt(limit, limit < 0.01 ? 4 : 3));
     T.xEnd.textContent = "round " + ex.round;
   };
 
