@@ -185,7 +185,7 @@ def test_pages_carry_icon_logo_preview_and_build_footer(built_book):
     assert re.search(r'<link rel="icon" href="_static/favicon\.svg"', page)
     assert '<link rel="apple-touch-icon" href="_static/apple-touch-icon.png" />' in page
     assert "_static/logo.svg" in page and "_static/logo-dark.svg" in page
-    assert re.search(r'<meta property="og:title" content="Clipping the objective · [^"]+"', page)
+    assert re.search(r'<meta property="og:title" content="(5\. )?Clipping the objective · [^"]+"', page)
     description = re.search(r'<meta property="og:description" content="([^"]{40,})"', page)
     assert description, "no og:description"
     footer = re.search(r"Built from minippo ([\w.]+) at (?:commit .*?<code>[0-9a-f]{7}</code>|an unknown commit)", page)
