@@ -5,6 +5,8 @@ L^CLIP takes the smaller of the unclipped term r_t Â_t and the clipped term cli
 is a pessimistic bound: the objective never gains from moving r_t past the band in the direction that helps, but it
 keeps the full (unclipped) penalty for moves that make things worse.
 
+Every array returned is a new float64 array (never an argument itself or a view of one); every value is a float.
+
 Grade: ``minippo grade 6``
 """
 

@@ -6,8 +6,11 @@ value V(s_t) (``values``), the value of the observation that followed it (``next
 - ``terminated[t]``: the episode reached a terminal state at step t; nothing follows, so V(s_{t+1}) counts as 0;
 - ``truncated[t]``: a time limit cut the episode at step t; the state was not terminal, so bootstrap from
   next_values[t], which holds V of the episode's final observation.
-Either way step t+1 starts a new episode, so nothing flows back across the boundary. The last step of the batch is
-cut by the horizon: bootstrap it from next_values[T−1] unless it terminated.
+Either way step t+1 starts a new episode, so nothing flows back across the boundary. A step with both flags set
+terminated (no bootstrap). The last step of the batch is cut by the horizon: bootstrap it from next_values[T−1] unless
+it terminated. With (T, N) arrays every column is its own environment with its own episode ends, so work element by
+element (np.where, not a Python ``if`` on an array). Every result is a new float64 array, whatever float type the
+inputs have.
 
 Grade: ``minippo grade 7``
 """

@@ -146,9 +146,15 @@ def cmd_plot(args) -> int:
 
 
 def cmd_grade(args) -> int:
-    from minippo.grade import grade
+    from minippo.grade import grade, grade_class
 
-    return grade(args.chapter, solutions=args.solutions)
+    if args.class_folder is not None:
+        if args.solutions:
+            raise MinippoError("--class grades the students' folders; leave out --solutions")
+        return grade_class(args.class_folder, args.chapter, csv_path=args.csv)
+    if args.csv is not None:
+        raise MinippoError("--csv goes with --class FOLDER (a folder of student folders)")
+    return grade(args.chapter, solutions=args.solutions, verbose=args.verbose)
 
 
 def build_parser() -> Parser:
@@ -181,9 +187,13 @@ def build_parser() -> Parser:
     p.add_argument("--title")
     p.set_defaults(func=cmd_plot)
 
-    p = sub.add_parser("grade", help="grade your exercises, chapter by chapter")
+    p = sub.add_parser("grade", help="grade your exercises, chapter by chapter (or a whole class with --class)")
     p.add_argument("chapter", nargs="?", help="a chapter number or name (default: all)")
     p.add_argument("--solutions", action="store_true", help="grade the reference solutions instead")
+    p.add_argument("--verbose", "-v", action="store_true", help="list every failing test with its message")
+    p.add_argument("--class", dest="class_folder", metavar="FOLDER",
+                   help="grade a class: FOLDER holds one folder of chNN_*.py modules per student")  # fmt: skip
+    p.add_argument("--csv", metavar="FILE", help="with --class: write one row per student and chapter to FILE")
     p.set_defaults(func=cmd_grade)
     return parser
 

@@ -1,32 +1,44 @@
-"""``minippo grade [CHAPTER] [--solutions]``: run the grading tests and print a scoreboard, chapter by chapter.
+"""``minippo grade [CHAPTER] [--solutions] [--verbose] [--class FOLDER --csv FILE]``: run the grading tests and print
+a scoreboard, chapter by chapter (or one line per student and chapter for a whole class).
 
 The tests (tests/exercises/test_chNN_*.py) run in a child pytest process with a time limit per test, so code that
 raises, returns NaN or never returns fails its tests instead of stopping the grader. Each result is written to a
 log as soon as it is known (this module is also the pytest plugin that writes it), so even a run that has to be
-stopped still reports what finished.
+stopped still reports what finished; if student code kills the test process itself, the test that was running is
+failed and the rest run in a new process.
 
 Which code is graded: exercises/ by default; solutions/ with --solutions; or the environment variable MINIPPO_IMPL
-(``exercises``, ``solutions``, or a folder holding chNN_*.py modules).
+(``exercises``, ``solutions``, or a folder holding chNN_*.py modules). With --class, every sub-folder of FOLDER is one
+student's folder of chNN_*.py modules, graded in its own process.
+
+The chapters are found, not listed: a chapter is graded when tests/exercises/test_chNN_<topic>.py exists, and its
+book name (``minippo grade the-min``) comes from book/NN-<name>.md. A new chapter needs only those two files.
 """
 
 from __future__ import annotations
 
+import csv
 import json
 import os
 import re
+import signal
 import subprocess
 import sys
 import tempfile
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 TESTS = ROOT / "tests" / "exercises"
+BOOK = ROOT / "book"
 IMPL_VARIABLE = "MINIPPO_IMPL"
 LOG_VARIABLE = "MINIPPO_GRADE_LOG"
 STOP_VARIABLE = "MINIPPO_GRADE_STOP_AT_FIRST_FAILURE"
 RUN_LIMIT_S = 1800  # the whole run; each test has its own, much shorter limit
-# the book's chapter names, so "minippo grade the-min" works as well as "minippo grade 6"
+RESTARTS = 5  # how many times a run whose test process died goes on with the tests that had not run
+# the book's chapter names, so "minippo grade the-min" works as well as "minippo grade 6"; book_names() adds any
+# book/NN-<name>.md page that is not here
 BOOK_NAMES = {
     1: "network",
     2: "distributions",
@@ -62,9 +74,17 @@ def chapter_files() -> dict[int, Path]:
     return files
 
 
+def book_names() -> dict[int, str]:
+    """{chapter number: the book page's name}, from book/NN-<name>.md, with BOOK_NAMES for what the book lacks."""
+    names = dict(BOOK_NAMES)
+    for page in BOOK.glob("[0-9][0-9]-*.md"):
+        names[int(page.name[:2])] = page.stem[3:]
+    return names
+
+
 def chapter_title(number: int) -> str:
     path = chapter_files().get(number)
-    topic = path.stem[10:] if path else BOOK_NAMES.get(number, "")
+    topic = path.stem[10:] if path else book_names().get(number, "")
     return f"ch{number:02d} {topic.replace('_', ' ')}"
 
 
@@ -82,7 +102,7 @@ def resolve_chapter(text: str) -> int | None:
     for number, path in chapter_files().items():
         if key in (path.stem[10:], path.stem[5:]):
             return number
-    for number, name in BOOK_NAMES.items():
+    for number, name in book_names().items():
         if key == name.replace("-", "_"):
             return number
     return None
@@ -103,6 +123,10 @@ def _log(record: dict) -> None:
 
 def pytest_collection_finish(session) -> None:
     _log({"collected": [item.nodeid for item in session.items]})
+
+
+def pytest_runtest_logstart(nodeid, location) -> None:
+    _log({"started": nodeid})
 
 
 def pytest_collectreport(report) -> None:
@@ -159,41 +183,86 @@ def plain_message(report) -> str:
 
 
 def run_tests(impl: str, files, stop_at_first_failure: bool = False, limit_s: float = RUN_LIMIT_S, extra_args=()):
-    """Run pytest on ``files`` against ``impl`` in a child process; return (collected node ids, results, note)."""
+    """Run pytest on ``files`` against ``impl`` in a child process; return (collected node ids, results, note).
+
+    If the child process dies (student code that calls os._exit, crashes the interpreter or is killed), the test it
+    was running fails with that reason and the tests that had not run yet run in a new child, so one crash costs one
+    test. The whole run, restarts included, stops after ``limit_s`` seconds."""
+    env = dict(os.environ)
+    env[IMPL_VARIABLE] = impl
+    if stop_at_first_failure:
+        env[STOP_VARIABLE] = "1"
+    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        env.setdefault(name, "1")  # small matrices: extra BLAS threads only spin
+    collected, results, note = [], {}, ""
+    targets = [str(f) for f in files]
+    deadline = time.monotonic() + limit_s
     with tempfile.TemporaryDirectory(prefix="minippo-grade-") as folder:
-        log = Path(folder) / "results.jsonl"
-        env = dict(os.environ)
-        env[IMPL_VARIABLE], env[LOG_VARIABLE] = impl, str(log)
-        if stop_at_first_failure:
-            env[STOP_VARIABLE] = "1"
-        for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-            env.setdefault(name, "1")  # small matrices: extra BLAS threads only spin
-        command = [
-            sys.executable, "-m", "pytest", *map(str, files), "-p", "minippo.grade", "-p", "no:cacheprovider",
-            "-q", "--no-header", "-o", "addopts=", "--continue-on-collection-errors", *extra_args,
-        ]  # fmt: skip
-        note = ""
-        try:
-            finished = subprocess.run(command, cwd=ROOT, env=env, capture_output=True, text=True, timeout=limit_s)
-            if finished.returncode not in (0, 1):
-                tail = (finished.stdout + finished.stderr).strip().splitlines()[-3:]
-                note = f"pytest stopped with exit code {finished.returncode}: {' / '.join(tail)}"
-        except subprocess.TimeoutExpired:
-            note = f"the run was stopped after {limit_s:g} s"
-        collected, results = [], {}
-        if log.exists():
-            for line in log.read_text(encoding="utf-8").splitlines():
-                record = json.loads(line)
-                if "collected" in record:
-                    collected = record["collected"]
-                    continue
-                old = results.get(record["nodeid"])
-                if old is None or old.outcome == "passed":  # a failing teardown spoils a passed call
-                    results[record["nodeid"]] = Result(record["nodeid"], record["outcome"], record["message"])
+        for attempt in range(RESTARTS + 1):
+            log = Path(folder) / f"results-{attempt}.jsonl"
+            env[LOG_VARIABLE] = str(log)
+            command = [
+                sys.executable, "-m", "pytest", *targets, "-p", "minippo.grade", "-p", "no:cacheprovider",
+                "-q", "--no-header", "-o", "addopts=", "--continue-on-collection-errors", "--tb=line", *extra_args,
+            ]  # fmt: skip
+            returncode = None
+            try:
+                left = max(1.0, deadline - time.monotonic())
+                finished = subprocess.run(command, cwd=ROOT, env=env, capture_output=True, text=True, timeout=left)
+                returncode = finished.returncode
+                if returncode not in (0, 1):
+                    tail = (finished.stdout + finished.stderr).strip().splitlines()[-3:]
+                    note = f"pytest stopped with exit code {returncode}: {' / '.join(tail)}"
+            except subprocess.TimeoutExpired:
+                note = f"the run was stopped after {limit_s:g} s"
+            running = _read_log(log, results)
+            if attempt == 0:
+                collected = running.pop("collected", [])
+            missing = [nodeid for nodeid in collected if nodeid not in results]
+            started = running.get("started")
+            if returncode in (0, 1) or returncode is None or not missing or started not in missing:
+                break
+            # the child died inside ``started``: fail that test, run the rest afresh
+            results[started] = Result(
+                started, "failed", f"the test process died while running it ({_death(returncode)})"
+            )
+            targets = [nodeid for nodeid in missing if nodeid != started]
+            note = ""
+            if not targets:
+                break
     for nodeid in collected:
         if nodeid not in results:
             results[nodeid] = Result(nodeid, "failed", f"did not finish ({note or 'no result'})")
-    return collected, list(results.values()), note
+    ordered = [results[nodeid] for nodeid in collected] + [r for n, r in results.items() if n not in set(collected)]
+    return collected, ordered, note
+
+
+def _read_log(log: Path, results: dict) -> dict:
+    """Read one child's log into ``results``; return {"collected": [...], "started": the last test begun}."""
+    found = {}
+    if not log.exists():
+        return found
+    for line in log.read_text(encoding="utf-8").splitlines():
+        record = json.loads(line)
+        if "collected" in record:
+            found["collected"] = record["collected"]
+            continue
+        if "started" in record:
+            found["started"] = record["started"]
+            continue
+        old = results.get(record["nodeid"])
+        if old is None or old.outcome == "passed":  # a failing teardown spoils a passed call
+            results[record["nodeid"]] = Result(record["nodeid"], record["outcome"], record["message"])
+    return found
+
+
+def _death(returncode: int) -> str:
+    if returncode < 0:
+        try:
+            return f"killed by signal {signal.Signals(-returncode).name}"
+        except ValueError:
+            return f"killed by signal {-returncode}"
+    return f"it exited with code {returncode}: does the code call sys.exit or os._exit?"
 
 
 def scoreboard(results, numbers) -> tuple[list[str], bool]:
@@ -219,30 +288,55 @@ def scoreboard(results, numbers) -> tuple[list[str], bool]:
     return lines, all_passed and total > 0
 
 
-def grade(chapter: str | None = None, solutions: bool = False, impl: str | None = None, out=None) -> int:
-    """Grade one chapter (or all), print the scoreboard; 0 if every test passed, 1 if not, 2 for bad input."""
-    out = out or sys.stdout
+def failures_in_detail(results, numbers) -> list[str]:
+    """Every failing test of the chapters, each with its message, for ``--verbose``."""
+    lines = []
+    for number in numbers:
+        failing = [r for r in results if r.chapter == number and r.outcome != "passed"]
+        if failing:
+            lines.append(f"{chapter_title(number)}: {len(failing)} failing")
+            lines.extend(f"  {r.nodeid.split('::', 1)[-1]}: {r.message}" for r in failing)
+    return lines
+
+
+def _chapters(chapter) -> list[int]:
+    """The chapter numbers to grade; raises ValueError with the one-line reason for a bad name."""
     files = chapter_files()
     if not files:
-        print(
-            f"minippo: error: no grading tests found in {TESTS} (grade from the course's repository)", file=sys.stderr
-        )
-        return 2
+        raise ValueError(f"no grading tests found in {TESTS} (grade from the course's repository)")
     if chapter is None:
-        numbers = sorted(files)
-    else:
-        number = resolve_chapter(str(chapter))
-        if number is None or number not in files:
-            known = ", ".join(f"{n} ({chapter_title(n)[5:]})" for n in sorted(files))
-            why = f"chapter {number} has no exercise" if number in BOOK_NAMES else f"unknown chapter '{chapter}'"
-            print(f"minippo: error: {why}; chapters with exercises: {known}", file=sys.stderr)
-            return 2
-        numbers = [number]
+        return sorted(files)
+    number = resolve_chapter(str(chapter))
+    if number is None or number not in files:
+        known = ", ".join(f"{n} ({chapter_title(n)[5:]})" for n in sorted(files))
+        why = f"chapter {number} has no exercise" if number in book_names() else f"unknown chapter '{chapter}'"
+        raise ValueError(f"{why}; chapters with exercises: {known}")
+    return [number]
+
+
+def _check_pytest_timeout() -> bool:
     try:
         import pytest_timeout  # noqa: F401 - the per-test time limits need it
     except ImportError:
         print("minippo: error: grading needs pytest and pytest-timeout: pip install -e '.[test]'", file=sys.stderr)
+        return False
+    return True
+
+
+def grade(
+    chapter: str | None = None, solutions: bool = False, impl: str | None = None, out=None, verbose: bool = False
+) -> int:
+    """Grade one chapter (or all), print the scoreboard; 0 if every test passed, 1 if not, 2 for bad input.
+    ``verbose`` lists every failing test with its message below the scoreboard."""
+    out = out or sys.stdout
+    try:
+        numbers = _chapters(chapter)
+    except ValueError as error:
+        print(f"minippo: error: {error}", file=sys.stderr)
         return 2
+    if not _check_pytest_timeout():
+        return 2
+    files = chapter_files()
     if impl is None:
         impl = "solutions" if solutions else os.environ.get(IMPL_VARIABLE, "").strip() or "exercises"
     where = f"{impl}/" if impl in ("exercises", "solutions") else impl
@@ -254,7 +348,74 @@ def grade(chapter: str | None = None, solutions: bool = False, impl: str | None 
     print("\n".join(lines), file=out)
     if note:
         print(f"note: {note}", file=out)
-    if not all_passed:
-        only = f" -k ch{numbers[0]:02d}" if len(numbers) == 1 else ""
-        print(f"Every test in detail: {IMPL_VARIABLE}={impl} pytest {TESTS.relative_to(ROOT)}{only}", file=out)
+    if verbose and not all_passed:
+        print("", file=out)
+        print("\n".join(failures_in_detail(results, numbers)), file=out)
+    elif not all_passed:
+        again = f"minippo grade {numbers[0]} --verbose" if len(numbers) == 1 else "minippo grade N --verbose"
+        print(f"Every failing test with its message: {again}", file=out)
     return 0 if all_passed else 1
+
+
+CSV_FIELDS = ["student", "chapter", "passed", "total", "first_failure"]
+
+
+def grade_class(
+    folder: str, chapter: str | None = None, csv_path: str | None = None, out=None, limit_s: float = RUN_LIMIT_S
+) -> int:
+    """Grade every student of a class: each sub-folder of ``folder`` holds one student's chNN_*.py modules. Each
+    student's code runs in its own child process under the same per-test time limits (and ``limit_s`` for the whole
+    student), so an endless loop or a crash costs only that student's line. Writes one CSV row per student and
+    chapter (student, chapter, passed, total, first_failure) to ``csv_path`` and prints the same as a table.
+    Returns 0 once every student is graded, 2 for bad input."""
+    out = out or sys.stdout
+    root = Path(folder).expanduser()
+    if not root.is_dir():
+        print(f"minippo: error: no class folder {folder}", file=sys.stderr)
+        return 2
+    students = sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith((".", "_")))
+    if not students:
+        print(
+            f"minippo: error: {folder} holds no student folders (one folder of chNN_*.py files each)", file=sys.stderr
+        )
+        return 2
+    try:
+        numbers = _chapters(chapter)
+    except ValueError as error:
+        print(f"minippo: error: {error}", file=sys.stderr)
+        return 2
+    if csv_path is not None and not Path(csv_path).expanduser().resolve().parent.is_dir():
+        print(f"minippo: error: no folder for the CSV file {csv_path}", file=sys.stderr)
+        return 2
+    if not _check_pytest_timeout():
+        return 2
+    files = chapter_files()
+    print(
+        f"Grading {len(students)} students in {folder} (chapter {', '.join(map(str, numbers))}).", file=out, flush=True
+    )
+    rows = []
+    width = max(len(s.name) for s in students + [Path("student")])
+    print(f"{'student':<{width}}  {'chapter':<22}  {'passed':>7}  first failure", file=out, flush=True)
+    for student in students:
+        _, results, note = run_tests(str(student.resolve()), [files[n] for n in numbers], limit_s=limit_s)
+        for number in numbers:
+            mine = [r for r in results if r.chapter == number]
+            passed = sum(r.outcome == "passed" for r in mine)
+            first = next((r for r in mine if r.outcome != "passed"), None)
+            comment = first.message if first else ("no tests ran" if not mine else "")
+            if note and not mine:
+                comment = note
+            row = {"student": student.name, "chapter": number, "passed": passed, "total": len(mine),
+                   "first_failure": comment}  # fmt: skip
+            rows.append(row)
+            score = f"{passed}/{len(mine)}"
+            shown = comment if len(comment) <= 100 else comment[:97] + "..."
+            shown = shown or "all passed"
+            print(f"{student.name:<{width}}  {chapter_title(number):<22}  {score:>7}  {shown}", file=out, flush=True)
+    if csv_path is not None:
+        with open(Path(csv_path).expanduser(), "w", newline="", encoding="utf-8") as handle:
+            writer = csv.DictWriter(handle, fieldnames=CSV_FIELDS)
+            writer.writeheader()
+            writer.writerows(rows)
+        print(f"Wrote {len(rows)} rows to {csv_path}.", file=out)
+    return 0

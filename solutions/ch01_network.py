@@ -4,6 +4,9 @@ A network is a list of layers ``[(W_1, b_1), ..., (W_L, b_L)]``, W_i of shape (i
 Every layer but the last is followed by tanh; the last layer is linear (it outputs logits, a mean or a value).
 Batches are rows: an input x has shape (n, in_1). Every array is float64.
 
+Every array returned is a new float64 array, never an argument itself or a view of one (except mlp_forward's cache,
+whose h_0 is x).
+
 Grade: ``minippo grade 1``
 """
 

@@ -6,6 +6,8 @@ log standard deviation vector log σ of shape (d,) shared by all states.
 Every ``*_backward`` takes the upstream gradient ∂L/∂(quantity), one number per sample, and returns ∂L/∂(parameters).
 All arrays are float64 except actions of a categorical, which are integers.
 
+Every array returned is a new float64 array (never an argument itself or a view of one); every value is a float.
+
 Grade: ``minippo grade 2``
 """
 

@@ -4,6 +4,8 @@ Objectives are written as the paper writes them, as something to *maximise*, ave
 and each returns its value together with its gradient with respect to log π_θ(a_t|s_t), one entry per sample. The
 distribution's ``*_backward`` (chapter 2) and the network's backward pass (chapter 1) carry that gradient on to θ.
 
+Every array returned is a new float64 array (never an argument itself or a view of one); every value is a float.
+
 Grade: ``minippo grade 3``
 """
 

@@ -3,6 +3,8 @@
 The samples come from the snapshot π_θold that collected them, and we improve π_θ on them for several epochs; the
 ratio r_t(θ) = π_θ(a_t|s_t) / π_θold(a_t|s_t) reweights each sample to the policy being optimised.
 
+Every array returned is a new float64 array (never an argument itself or a view of one); every value is a float.
+
 Grade: ``minippo grade 4``
 """
 

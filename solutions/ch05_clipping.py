@@ -3,6 +3,8 @@
 This chapter's surrogate uses the clipped ratio alone, clip(r_t, 1 − ε, 1 + ε) Â_t. It is half of L^CLIP: chapter 6
 adds the min with the unclipped term, and shows why the clipped term alone is not enough.
 
+Every array returned is a new float64 array (never an argument itself or a view of one); every value is a float.
+
 Grade: ``minippo grade 5``
 """
 

@@ -4,6 +4,8 @@ With one network for the policy and the value, one objective trains both:
     L^{CLIP+VF+S} = Ê[L^CLIP_t − c1 L^VF_t + c2 S[π_θ](s_t)].
 This course's value loss carries a factor ½ (so its gradient is the plain error): L^VF = ½ Ê[(V_θ(s_t) − V^targ_t)²].
 
+Every array returned is a new float64 array (never an argument itself or a view of one); every value is a float.
+
 Grade: ``minippo grade 8``
 """
 

@@ -4,6 +4,8 @@ The penalised surrogate is L^KLPEN = Ê[r_t Â_t − β KL[π_θold(·|s_t), π_
 β is halved if the measured KL d was well below the target and doubled if it was well above.
 The KL is taken with the old policy first: KL[π_old ‖ π] = Σ_a π_old(a) (log π_old(a) − log π(a)).
 
+Every array returned is a new float64 array (never an argument itself or a view of one); every value is a float.
+
 Grade: ``minippo grade 9``
 """
 

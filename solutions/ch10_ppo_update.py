@@ -32,8 +32,10 @@ def loss_and_grad(agent, minibatch: dict, config) -> float:
 
     minibatch: a dict of arrays with n rows: "obs" (n, obs_dim), "actions", "logp" (log π_θold(a_t|s_t)),
     "advantages" (Â_t), "returns" (V^targ_t); ignore any other keys.
-    config: a minippo.ppo.Config; use clip_epsilon (ε), value_coef (c1), entropy_coef (c2), normalize_advantages.
-        1. Â ← (Â − mean Â) / (std Â + 1e-8) if config.normalize_advantages and n > 1   (chapter 3)
+    config: a minippo.ppo.Config; use clip_epsilon (ε), value_coef (c1), entropy_coef (c2), normalize_advantages,
+    whatever their values (the tests change each of them).
+        1. Â ← (Â − mean Â) / (std Â + 1e-8) over this minibatch, if config.normalize_advantages and n > 1 (np.std,
+           the population standard deviation; chapter 3)
         2. L^CLIP with ε and its gradient in log π                                     (chapter 6)
         3. L^VF = ½ Ê[(V − V^targ)²] and its gradient in V (no value clipping here)     (chapter 8)
         4. S = Ê[entropy of π_θ(·|s_t)], only when c2 ≠ 0                               (chapter 2)
@@ -71,10 +73,12 @@ def ppo_update(agent, optimizer, data: dict, config, rng: np.random.Generator) -
     optimizer: has step(grads), one descent step of agent.params given the loss gradient (a minippo.optimizer.Adam).
     config: uses epochs (K), minibatch_size (M), shuffle_minibatches, grad_norm_clipping, max_grad_norm, and what
     loss_and_grad uses.  rng: a NumPy Generator for the shuffling.
-    For each of the K epochs: order = rng.permutation(n) if config.shuffle_minibatches, else 0 … n−1; cut it into
-    consecutive minibatches of M rows (the last may be smaller; every row is used once per epoch); for each
-    minibatch, loss_and_grad, then scale agent.grads so that its global L2 norm is at most config.max_grad_norm
-    (if config.grad_norm_clipping), then optimizer.step(agent.grads).
+    For each of the K epochs: order = rng.permutation(n) if config.shuffle_minibatches, else 0 … n−1 (a new
+    permutation at the start of every epoch, drawn from this rng and nothing else, which makes no other draws from
+    it); cut it into consecutive minibatches of M rows (the last may be smaller; every row is used once per epoch);
+    for each minibatch, loss_and_grad on those rows (which normalises the advantages over that minibatch only), then
+    scale agent.grads so that its global L2 norm is at most config.max_grad_norm (if config.grad_norm_clipping),
+    then optimizer.step(agent.grads). data is left unchanged.
     Returns the number of optimizer steps taken, K · ceil(n / M).
     """
     n = len(data["logp"])

@@ -5,6 +5,8 @@ The implementation is chosen by the environment variable MINIPPO_IMPL:
 - ``exercises``: the student's modules in exercises/;
 - ``wrong``: the deliberately wrong variants in tests/exercises/wrong/ (each test runs once per variant of its
   chapter); the instructors' proof that the tests reject them;
+- ``right``: other correct ways to write the exercises, in tests/exercises/right/ (once per variant); the proof that
+  the tests accept any correct implementation, not only the reference's way;
 - a folder path: a folder holding chNN_*.py modules with the same functions (a copy of exercises/ elsewhere).
 
 Test modules import the ``student`` fixture and ``pytest_generate_tests`` from here. (A conftest.py in this folder
@@ -17,8 +19,11 @@ import copy
 import functools
 import importlib
 import importlib.util
+import inspect
+import linecache
 import os
 import sys
+import traceback
 from pathlib import Path
 
 import numpy as np
@@ -54,7 +59,8 @@ class Broken:
 
 
 class Student:
-    """The module under test. Its functions are wrapped so that an exception names the function that raised it."""
+    """The module under test. Its functions are wrapped so that an exception names the call that raised it: the
+    function, the shapes of its inputs, and the line of the student's code."""
 
     def __init__(self, module, where: str):
         self._module, self._where = module, where
@@ -75,9 +81,63 @@ class Student:
                 raise StudentError(f"{name} is not written yet (it raises NotImplementedError)") from error
             except Exception as error:  # noqa: BLE001 - any mistake in the student's code becomes a plain message
                 first_line = str(error).strip().splitlines()[0] if str(error).strip() else ""
-                raise StudentError(f"{name} raised {type(error).__name__}: {first_line}".rstrip(": ")) from error
+                what = f"{type(error).__name__}: {first_line}".rstrip(": ")
+                raise StudentError(
+                    f"{describe_call(value, name, args, kwargs)} raised {what}{_line_of(error)}{_hint(what)}"
+                ) from error
 
         return call
+
+
+def describe_value(value) -> str:
+    """An input as a student would want to see it in an error: arrays by shape (and dtype when not float64)."""
+    if isinstance(value, np.ndarray):
+        dtype = "" if value.dtype == np.float64 else f" {value.dtype}"
+        return f"array {value.shape}{dtype}"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{key!r}: {describe_value(item)}" for key, item in value.items()) + "}"
+    if isinstance(value, (list, tuple)):
+        inner = ", ".join(describe_value(item) for item in value[:4]) + (", ..." if len(value) > 4 else "")
+        return f"[{inner}]" if isinstance(value, list) else f"({inner})"
+    if isinstance(value, (bool, int, float, np.number)):
+        return repr(value.item() if isinstance(value, np.number) else value)
+    return type(value).__name__
+
+
+def describe_call(function, name: str, args, kwargs) -> str:
+    """'gae(rewards=array (24, 3), ..., gamma=0.9)': which call, with which input shapes."""
+    try:
+        bound = inspect.signature(function).bind(*args, **kwargs)
+        parts = [f"{key}={describe_value(item)}" for key, item in bound.arguments.items()]
+    except (TypeError, ValueError):
+        parts = [describe_value(item) for item in args] + [f"{k}={describe_value(v)}" for k, v in kwargs.items()]
+    return f"{name}({', '.join(parts)})"
+
+
+def _line_of(error: BaseException) -> str:
+    """' (at line 12 of ch07_advantages.py: `if terminated[t]:`)', the last line of the graded code in the traceback."""
+    found = ""
+    for frame, line_number in traceback.walk_tb(error.__traceback__):
+        filename = frame.f_code.co_filename
+        if Path(filename).name.startswith("ch") and "site-packages" not in filename:
+            text = linecache.getline(filename, line_number).strip()
+            found = f" (at line {line_number} of {Path(filename).name}: `{text}`)" if text else ""
+    return found
+
+
+HINTS = {
+    "truth value of an array": "a Python if, and, or, not or while on an array; use np.where, &, | and ~, which work "
+    "element by element on (T,) and (T, N) alike",
+    "operands could not be broadcast": "two arrays of different shapes met; check the shapes in the contract",
+    "only integer scalar arrays can be converted": "an index or a size that is an array; use len(...) or .shape",
+}
+
+
+def _hint(what: str) -> str:
+    for key, hint in HINTS.items():
+        if key in what:
+            return f"; {hint}"
+    return ""
 
 
 def _describe(error: BaseException) -> str:
@@ -96,22 +156,26 @@ def _import_file(path: Path, name: str):
     return module
 
 
-def load_wrong_variant(chapter: str, variant: str):
-    """A fresh copy of the reference solution of ``chapter`` with the functions of one wrong variant swapped in.
+VARIANT_FOLDERS = ("wrong", "right")
+
+
+def load_wrong_variant(chapter: str, variant: str, folder: str = "wrong"):
+    """A fresh copy of the reference solution of ``chapter`` with the functions of one variant (from tests/exercises/
+    wrong/ or right/) swapped in.
 
     The swap is made in the copy's globals, so the solution's other functions call the wrong one too (as a student's
     ppo_update would call their own loss_and_grad).
     """
-    module = _import_file(ROOT / "solutions" / f"{chapter}.py", f"_solution_{chapter}_{variant}")
-    wrong = _import_file(ROOT / "tests" / "exercises" / "wrong" / f"{chapter}.py", f"_wrong_{chapter}")
+    module = _import_file(ROOT / "solutions" / f"{chapter}.py", f"_solution_{chapter}_{folder}_{variant}")
+    wrong = _import_file(ROOT / "tests" / "exercises" / folder / f"{chapter}.py", f"_{folder}_{chapter}")
     for name, function in wrong.VARIANTS[variant].items():
         setattr(module, name, function)
     return module
 
 
-def wrong_variants(chapter: str) -> list[str]:
-    path = ROOT / "tests" / "exercises" / "wrong" / f"{chapter}.py"
-    return list(_import_file(path, f"_wrong_{chapter}").VARIANTS) if path.exists() else []
+def wrong_variants(chapter: str, folder: str = "wrong") -> list[str]:
+    path = ROOT / "tests" / "exercises" / folder / f"{chapter}.py"
+    return list(_import_file(path, f"_{folder}_{chapter}").VARIANTS) if path.exists() else []
 
 
 _loaded: dict[tuple, object] = {}
@@ -129,8 +193,8 @@ def load_student(chapter: str, impl: str, variant: str | None = None):
 
 
 def _load(chapter: str, impl: str, variant: str | None):
-    if impl == "wrong":
-        return Student(load_wrong_variant(chapter, variant), f"wrong variant {chapter}:{variant}")
+    if impl in VARIANT_FOLDERS:
+        return Student(load_wrong_variant(chapter, variant, impl), f"{impl} variant {chapter}:{variant}")
     if impl in ("solutions", "exercises"):
         where = f"{impl}/{chapter}.py"
         path = ROOT / impl / f"{chapter}.py"
@@ -152,19 +216,20 @@ def _load(chapter: str, impl: str, variant: str | None):
 
 
 def pytest_generate_tests(metafunc):
-    """Under MINIPPO_IMPL=wrong, run every test once per wrong variant of its chapter."""
-    if "student" in metafunc.fixturenames and implementation() == "wrong":
-        variants = wrong_variants(chapter_of(metafunc.module.__name__))
-        metafunc.parametrize("student", variants or [None], indirect=True, ids=lambda v: f"wrong_{v}")
+    """Under MINIPPO_IMPL=wrong (or right), run every test once per wrong (or right) variant of its chapter."""
+    impl = implementation()
+    if "student" in metafunc.fixturenames and impl in VARIANT_FOLDERS:
+        variants = wrong_variants(chapter_of(metafunc.module.__name__), impl)
+        metafunc.parametrize("student", variants or [None], indirect=True, ids=lambda v: f"{impl}_{v}")
 
 
 @pytest.fixture
 def student(request):
     chapter = chapter_of(request.module.__name__)
     impl = implementation()
-    if impl == "wrong":
+    if impl in VARIANT_FOLDERS:
         if request.param is None:
-            pytest.skip(f"{chapter} has no wrong variants")
+            pytest.skip(f"{chapter} has no {impl} variants")
         return load_student(chapter, impl, request.param)
     return load_student(chapter, impl)
 
@@ -178,46 +243,184 @@ def rng():
 
 
 def check_array(value, name: str, shape: tuple, what: str = "the result") -> np.ndarray:
-    """``value`` is a finite float array of ``shape``, or the test fails saying what is wrong."""
-    assert isinstance(value, np.ndarray), f"{name}: {what} should be a NumPy array, not {type(value).__name__}"
+    """``value`` is a finite float64 array of ``shape``, or the test fails saying what is wrong."""
+    assert isinstance(value, np.ndarray), (
+        f"{name}: {what} should be a NumPy array of shape {tuple(shape)}, not {type(value).__name__} "
+        f"(returned: {_short(value)})"
+    )
     assert value.shape == tuple(shape), f"{name}: {what} should have shape {tuple(shape)}, not {value.shape}"
-    assert np.issubdtype(value.dtype, np.floating), f"{name}: {what} should hold floats, not {value.dtype}"
-    assert np.all(np.isfinite(value)), f"{name}: {what} holds NaN or infinite numbers"
+    assert value.dtype == np.float64, (
+        f"{name}: {what} should be a float64 array (the contract's dtype), not {value.dtype}"
+        + (" (an integer or boolean array: start from np.zeros(shape) or cast to float)" if value.dtype.kind in "biu"
+           else " (np.zeros_like(x) copies x's dtype; build the result with dtype=np.float64)")
+    )  # fmt: skip
+    assert np.all(np.isfinite(value)), f"{name}: {what} holds NaN or infinite numbers: {_short(value)}"
     return value
 
 
 def check_scalar(value, name: str, what: str = "the value") -> float:
-    assert np.ndim(value) == 0, f"{name}: {what} should be a single number, not an array of shape {np.shape(value)}"
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise AssertionError(f"{name}: {what} should be a number, not {type(value).__name__}") from None
+    """``value`` is one finite float64 number (a Python float, np.float64, or a 0-d float64 array)."""
+    assert np.ndim(value) == 0, (
+        f"{name}: {what} should be a single number, not {type(value).__name__} of shape {np.shape(value)} "
+        f"(returned: {_short(value)})"
+    )
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (float, int, np.number, np.ndarray)):
+        raise AssertionError(f"{name}: {what} should be a float, not {type(value).__name__} ({_short(value)})")
+    dtype = np.asarray(value).dtype
+    assert dtype.kind != "f" or dtype == np.float64, (
+        f"{name}: {what} should be a float64 number (a Python float), not {dtype}: use float(...)"
+    )
+    assert dtype.kind == "f", f"{name}: {what} should be a float, not the integer {value!r} (a count, not a mean?)"
+    number = float(value)
     assert np.isfinite(number), f"{name}: {what} is NaN or infinite"
     return number
 
 
-def check_close(actual, expected, name: str, what: str, rtol: float = 1e-6, atol: float = 1e-9) -> None:
+def _short(value) -> str:
+    text = np.array2string(value, precision=4, threshold=8) if isinstance(value, np.ndarray) else repr(value)
+    text = " ".join(text.split())
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+def _number(x: float, digits: int = 6) -> str:
+    return f"{x:.{digits}g}"
+
+
+def expect_number(
+    got, expected: float, name: str, what: str, why: str = "", rtol=1e-6, atol=1e-9, alternatives=None
+) -> None:
+    """One number: "name: what should be expected (why), not got", with enough digits to see the difference.
+    ``alternatives``: {what a plausible mistake is: the number it gives}; the message names the one ``got`` equals."""
+    got = check_scalar(got, name, what) if np.ndim(got) == 0 else check_array(got, name, (1,), what)[0]
+    if abs(got - expected) <= atol + rtol * abs(expected):
+        return
+    digits = 6
+    while digits < 17 and _number(got, digits) == _number(expected, digits):
+        digits += 3
+    because = f" ({why})" if why else ""
+    mistakes = [
+        words
+        for words, value in (alternatives or {}).items()
+        if value is not None and abs(got - value) <= atol + rtol * abs(value)
+    ]
+    named = ": " + " Or ".join(f"{words}?" for words in mistakes) if mistakes else ""
+    raise AssertionError(
+        f"{name}: {what} should be {_number(expected, digits)}{because}, not {_number(got, digits)}{named}"
+    )
+
+
+def check_close(actual, expected, name: str, what: str, rtol: float = 1e-6, atol: float = 1e-9, where=None) -> None:
+    """``actual`` equals ``expected`` to the tolerance, or the test fails showing the worst entry: its index, the inputs
+    there (``where``: a dict of name -> array of the result's shape or a number, or a function of the index giving
+    text), and as many digits as it takes to see the difference."""
+    dtype = getattr(actual, "dtype", None)
     actual, expected = np.asarray(actual, dtype=np.float64), np.asarray(expected, dtype=np.float64)
     assert actual.shape == expected.shape, f"{name}: {what} should have shape {expected.shape}, not {actual.shape}"
     error = np.abs(actual - expected)
     bound = atol + rtol * np.abs(expected)
-    if not np.all(error <= bound):
-        worst = np.unravel_index(int(np.argmax(error - bound)), error.shape) if error.ndim else ()
-        at = f" at index {tuple(int(i) for i in worst)}" if worst else ""
-        raise AssertionError(
-            f"{name}: {what} is wrong{at}: got {float(actual[worst]):.6g}, expected {float(expected[worst]):.6g}"
-        )
+    if np.all(error <= bound):
+        return
+    worst = np.unravel_index(int(np.nanargmax(np.where(np.isnan(error), np.inf, error - bound))), error.shape)
+    worst = worst if error.ndim else ()
+    got, want = float(actual[worst]), float(expected[worst])
+    at = f" at index {tuple(int(i) for i in worst) if len(worst) > 1 else int(worst[0])}" if error.size > 1 else ""
+    context = _context(where, worst)
+    digits = 6
+    while digits < 17 and _number(got, digits) == _number(want, digits):
+        digits += 3
+    detail = ""
+    if digits > 6:
+        detail = f" (they differ by {abs(got - want):.3g}, more than the tolerance {bound[worst]:.3g}"
+        if dtype is not None and dtype != np.float64:
+            detail += f"; the result is {dtype}, not float64"
+        detail += ")"
+    raise AssertionError(
+        f"{name}: {what} is wrong{at}{context}: got {_number(got, digits)}, expected {_number(want, digits)}{detail}"
+        + _pattern(actual, expected)
+    )
 
 
-def call_checking_inputs(function, name: str, *args, **kwargs):
-    """Call ``function`` and fail if it changed any of its array arguments in place."""
+def _pattern(actual: np.ndarray, expected: np.ndarray) -> str:
+    """A hint when the whole result is off by one factor: the sign, n (a sum for a mean), 2 or ½."""
+    if actual.size < 2:
+        got, want = float(actual.reshape(-1)[0]), float(expected.reshape(-1)[0])
+        if want == 0 or not np.isfinite(got):
+            return ""
+        factor = got / want
+        if abs(factor + 1) < 1e-6:
+            return " (the opposite sign)"
+        if abs(factor - 2) < 1e-6 or abs(factor - 0.5) < 1e-6:
+            return f" ({'twice' if factor > 1 else 'half'} the expected: a factor ½ or 2?)"
+        if factor > 1.5 and abs(factor - round(factor)) < 1e-6:
+            return f" ({round(factor)} times the expected: a sum over the batch where the mean belongs?)"
+        return ""
+    top = float(np.max(np.abs(expected)))
+    scale = np.abs(expected) > 1e-4 * top
+    if top == 0 or scale.sum() < 2 or not np.all(np.abs(actual[~scale]) < 1e-3 * top):
+        return ""
+    factors = actual[scale] / expected[scale]
+    factor = float(np.median(factors))
+    if not np.allclose(factors, factor, rtol=1e-4) or abs(factor - 1) < 1e-6 or abs(factor) < 1e-9:
+        return ""
+    for value, words in [
+        (-1.0, "the sign is flipped everywhere"),
+        (float(actual.shape[0]), f"{actual.shape[0]} = n times too large everywhere: a sum where the mean belongs?"),
+        (1 / actual.shape[0], f"n = {actual.shape[0]} times too small everywhere: a mean where the sum belongs?"),
+        (2.0, "twice the expected everywhere: a factor ½ or 2?"),
+        (0.5, "half the expected everywhere: a factor ½ or 2?"),
+    ]:
+        if abs(factor - value) < 1e-4 * abs(value):
+            return f" ({words})"
+    return f" (got = {factor:.4g} × expected everywhere: one constant factor off)"
+
+
+def _context(where, index) -> str:
+    if where is None:
+        return ""
+    if callable(where):
+        return f" ({where(index)})"
+    parts = []
+    for key, value in where.items():
+        value = np.asarray(value)
+        if value.ndim and index:
+            value = value[index] if value.ndim == len(index) else value[index[0]]
+        parts.append(f"{key} = {_number(float(value), 4) if value.dtype.kind in 'fiu' else value}")
+    return f" (where {', '.join(parts)})"
+
+
+def call_checking_inputs(function, name: str, *args, may_alias=(), **kwargs):
+    """Call ``function``; fail if it changed any of its array arguments in place, or returned one of them (or a view
+    of one) where the contract asks for new arrays. ``may_alias``: positions in the result (a tuple) exempt from the
+    second check, where the contract returns an input itself."""
     before = copy.deepcopy((args, kwargs))
     result = function(*args, **kwargs)
     for position, (old, new) in enumerate(zip(before[0], args)):
         _check_unchanged(old, new, name, f"argument {position + 1}")
     for key in kwargs:
         _check_unchanged(before[1][key], kwargs[key], name, f"argument {key}")
+    inputs = list(_arrays(args)) + list(_arrays(kwargs))
+    outputs = result if isinstance(result, tuple) else (result,)
+    for position, output in enumerate(outputs):
+        if position in may_alias:
+            continue
+        for array in _arrays(output):
+            if any(np.shares_memory(array, given) for given in inputs):
+                raise AssertionError(
+                    f"{name} returned one of its inputs (or a view of it) instead of a new array: the caller's array "
+                    "and the result would change together; return a copy"
+                )
     return result
+
+
+def _arrays(value):
+    if isinstance(value, np.ndarray):
+        yield value
+    elif isinstance(value, (list, tuple)):
+        for item in value:
+            yield from _arrays(item)
+    elif isinstance(value, dict):
+        for item in value.values():
+            yield from _arrays(item)
 
 
 def _check_unchanged(old, new, name: str, which: str) -> None:
@@ -245,3 +448,15 @@ def numerical_gradient(f, x: np.ndarray, h: float = 1e-6) -> np.ndarray:
         flat[i] = saved
         out[i] = (up - down) / (2 * h)
     return grad
+
+
+def where_is_ratio(r: float, epsilon: float) -> str:
+    """Where r lies relative to the band 1 − ε < r < 1 + ε, and, in the windows between 1 ± ε and e^±ε, how a band
+    on |log r| would place it instead."""
+    low, high = 1 - epsilon, 1 + epsilon
+    side = "above the band" if r > high else "below the band" if r < low else "inside the band"
+    text = f"{side} ({low:g}, {high:g}): |r − 1| = {abs(r - 1):.3g} {'>' if abs(r - 1) > epsilon else '<'} ε"
+    if (abs(r - 1) > epsilon) != (abs(np.log(r)) > epsilon):
+        log_side = ">" if abs(np.log(r)) > epsilon else "<"
+        text += f", although |log r| = {abs(np.log(r)):.3g} {log_side} ε: the band is on r, not on log r"
+    return text

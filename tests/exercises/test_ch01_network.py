@@ -69,7 +69,7 @@ def test_tanh_backward_is_zero_where_tanh_is_flat(student):
 def test_mlp_forward_matches_the_definition(student, rng, sizes):
     layers = random_layers(rng, sizes)
     x = rng.normal(size=(7, sizes[0]))
-    out, cache = call_checking_inputs(student.mlp_forward, "mlp_forward", layers, x)
+    out, cache = call_checking_inputs(student.mlp_forward, "mlp_forward", layers, x, may_alias=(1,))
     expected_out, expected_cache = reference_forward(layers, x)
     check_array(out, "mlp_forward", (7, sizes[-1]), "the output")
     check_close(out, expected_out, "mlp_forward", "the output (tanh between layers, none after the last)")
@@ -110,6 +110,22 @@ def test_mlp_backward_matches_finite_differences(student, rng, sizes):
 
 
 # Adam
+
+
+@pytest.mark.parametrize("t", [1, 2, 5])
+def test_adam_bias_correction_uses_the_step_number(student, t):
+    # m and v as they stand before step t under a constant gradient g: m̂ = g and v̂ = g² exactly, so the step is lr
+    g, beta1, beta2 = np.array([0.5, -2.0]), 0.9, 0.999
+    m, v = (1 - beta1 ** (t - 1)) * g, (1 - beta2 ** (t - 1)) * g * g
+    new_params, _, _ = student.adam_step(np.zeros(2), g, m, v, t, lr=0.05)
+    check_array(new_params, "adam_step", (2,), f"the new parameters at step t = {t}")
+    check_close(
+        -new_params,
+        0.05 * g / (np.abs(g) + 1e-8),
+        "adam_step",
+        f"the step at t = {t} under a constant gradient (with bias correction by 1 − β1ᵗ and 1 − β2ᵗ, t the number of "
+        "this step, it is lr · g/(|g| + eps))",
+    )
 
 
 def test_adam_first_step_moves_each_parameter_by_about_lr(student, rng):

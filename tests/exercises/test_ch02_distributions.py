@@ -96,6 +96,36 @@ def test_categorical_log_prob_backward_matches_finite_differences(student, rng, 
     check_close(grad, expected, "categorical_log_prob_backward", "∂L/∂z (checked by finite differences)", 1e-5, 1e-7)
 
 
+EXTREME_LOGITS = np.array(
+    [
+        [1000.0, 999.0, 0.0, -1000.0],
+        [800.0, 800.0, 800.0, 800.0],
+        [-1000.0, -1000.0, 0.0, 0.5],
+        [0.0, 30.0, 700.0, 699.0],
+    ]
+)
+
+
+def stable_log_softmax(logits):
+    shifted = logits - logits.max(axis=1, keepdims=True)
+    return shifted - np.log(np.exp(shifted).sum(axis=1, keepdims=True))
+
+
+def test_categorical_log_prob_backward_at_extreme_logits(student):
+    actions, grad_logp = np.array([1, 2, 3, 0]), np.array([1.0, -2.0, 0.5, 3.0])
+    grad = student.categorical_log_prob_backward(EXTREME_LOGITS, actions, grad_logp)
+    check_array(grad, "categorical_log_prob_backward", (4, 4), "∂L/∂z for logits near ±1000 (subtract each row's max)")
+    expected = -np.exp(stable_log_softmax(EXTREME_LOGITS)) * grad_logp[:, None]
+    expected[np.arange(4), actions] += grad_logp
+    check_close(
+        grad,
+        expected,
+        "categorical_log_prob_backward",
+        "∂L/∂z = ∂L/∂ log π · (onehot(a) − π) for logits near ±1000 (π from the max-shifted softmax)",
+        where=lambda i: f"row {i[0]}, z = {EXTREME_LOGITS[i[0]].tolist()}",
+    )
+
+
 def test_categorical_entropy_matches_the_sum(student, logits):
     entropy = call_checking_inputs(student.categorical_entropy, "categorical_entropy", logits)
     check_array(entropy, "categorical_entropy", (6,))
@@ -126,6 +156,23 @@ def test_categorical_entropy_backward_matches_finite_differences(student, logits
 
     expected = numerical_gradient(weighted_entropy, logits)
     check_close(grad, expected, "categorical_entropy_backward", "∂L/∂z (checked by finite differences)", 1e-5, 1e-7)
+
+
+def test_categorical_entropy_backward_at_extreme_logits(student):
+    grad_entropy = np.array([1.0, -2.0, 0.5, 3.0])
+    grad = student.categorical_entropy_backward(EXTREME_LOGITS, grad_entropy)
+    check_array(grad, "categorical_entropy_backward", (4, 4), "∂L/∂z for logits near ±1000 (subtract each row's max)")
+    log_probs = stable_log_softmax(EXTREME_LOGITS)
+    probs = np.exp(log_probs)
+    entropy = -(probs * log_probs).sum(axis=1)
+    expected = -probs * (log_probs + entropy[:, None]) * grad_entropy[:, None]
+    check_close(
+        grad,
+        expected,
+        "categorical_entropy_backward",
+        "∂L/∂z = −π (log π + S) ∂L/∂S for logits near ±1000 (π and log π from the max-shifted log-softmax)",
+        where=lambda i: f"row {i[0]}, z = {EXTREME_LOGITS[i[0]].tolist()}",
+    )
 
 
 # diagonal Gaussian

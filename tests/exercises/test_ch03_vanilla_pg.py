@@ -40,7 +40,8 @@ def test_normalize_advantages_gives_mean_zero_and_std_one(student, rng):
     mean = sum(normalized) / 12
     std = np.sqrt(sum((x - mean) ** 2 for x in normalized) / 12)
     assert abs(mean) < 1e-9, f"normalize_advantages: the mean should be 0, not {mean:.3g} (subtract the mean)"
-    assert abs(std - 1.0) < 1e-6, f"normalize_advantages: the standard deviation should be 1, not {std:.6g}"
+    hint = " (np.std is the population standard deviation, ddof = 0)" if abs(std - np.sqrt(11 / 12)) < 1e-6 else ""
+    assert abs(std - 1.0) < 1e-6, f"normalize_advantages: the standard deviation should be 1, not {std:.6g}{hint}"
     assert np.all(np.argsort(normalized) == np.argsort(advantages)), "normalize_advantages: the order must not change"
 
 
@@ -57,7 +58,7 @@ def test_normalize_advantages_ignores_shift_and_scale(student, rng):
 
 
 def test_normalize_advantages_edge_cases(student):
-    single = student.normalize_advantages(np.array([2.5]))
+    single = call_checking_inputs(student.normalize_advantages, "normalize_advantages", np.array([2.5]))
     check_array(single, "normalize_advantages", (1,), "the result for a single sample")
     check_close(single, [2.5], "normalize_advantages", "a single sample (it should be returned unchanged)")
     equal = student.normalize_advantages(np.full(5, 3.0))

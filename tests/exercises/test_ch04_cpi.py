@@ -40,8 +40,20 @@ def test_cpi_objective_value_and_gradient(student, batch, n):
     check_close(check_scalar(value, "cpi_objective"), expected_value, "cpi_objective", "the value Ê[r Â]")
     check_array(grad, "cpi_objective", (n,), "the gradient")
     expected = numerical_gradient(lambda: float(student.cpi_objective(logp, logp_old, advantages)[0]), logp)
-    check_close(grad, expected, "cpi_objective", "∂L/∂ log π (checked by finite differences of the value)")
-    check_close(grad, ratios * advantages / n, "cpi_objective", "∂L/∂ log π (it should be r_t Â_t / n)")
+    check_close(
+        grad,
+        expected,
+        "cpi_objective",
+        "∂L/∂ log π (checked by finite differences of the value)",
+        where={"r_t": ratios, "Â_t": advantages, "n": n},
+    )
+    check_close(
+        grad,
+        ratios * advantages / n,
+        "cpi_objective",
+        "∂L/∂ log π (it should be r_t Â_t / n)",
+        where={"r_t": ratios, "Â_t": advantages, "n": n},
+    )
 
 
 def test_cpi_gradient_at_the_snapshot_is_the_policy_gradient(student, batch):

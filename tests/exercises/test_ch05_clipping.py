@@ -1,9 +1,22 @@
-"""Grading chapter 5: the clipped term against a direct clip and finite differences; the clip fraction by counting."""
+"""Grading chapter 5: the clipped term one sample at a time (inside, above and below the band, and in the narrow
+windows between 1 ± ε and e^±ε where a band on |log r| goes wrong), then against a direct clip and finite differences
+on whole batches; the clip fraction by counting.
+
+Tests run from the most specific to the most general, so the first failure names the mistake.
+"""
 
 import _harness
 import numpy as np
 import pytest
-from _harness import call_checking_inputs, check_array, check_close, check_scalar, numerical_gradient
+from _harness import (
+    call_checking_inputs,
+    check_array,
+    check_close,
+    check_scalar,
+    expect_number,
+    numerical_gradient,
+    where_is_ratio,
+)
 
 student = _harness.student  # the fixture: the implementation under test (see _harness.py)
 pytest_generate_tests = _harness.pytest_generate_tests  # one run per wrong variant under MINIPPO_IMPL=wrong
@@ -11,72 +24,82 @@ rng = _harness.rng  # a seeded NumPy Generator
 
 pytestmark = pytest.mark.timeout(10)
 
-# ratios across and beyond the band of every ε used here, away from its edges (where the gradient jumps)
-RATIOS = np.array([0.4, 0.65, 0.75, 0.86, 0.95, 1.0, 1.04, 1.15, 1.26, 1.35, 1.7, 2.5])
+# ratios across and beyond the band of every ε used here, away from its edges (where the gradient jumps), with one
+# ratio in each window between 1 + ε and e^ε and between e^−ε and 1 − ε, for ε = 0.1, 0.2 and 0.3
+RATIOS = np.array([0.4, 0.65, 0.72, 0.75, 0.81, 0.86, 0.902, 0.95, 1.0, 1.04, 1.103, 1.15, 1.21, 1.26, 1.32, 1.7, 2.5])
+# (r, Â, ε): single samples, the windows included
+SINGLE = [
+    (0.9, 1.0, 0.2),
+    (1.1, -2.0, 0.2),
+    (1.5, 1.0, 0.2),
+    (0.5, 1.0, 0.2),
+    (1.5, -1.0, 0.2),
+    (1.15, 1.0, 0.1),
+    (1.25, -1.0, 0.3),
+    (1.21, 1.0, 0.2),
+    (0.81, 1.5, 0.2),
+    (1.103, -1.0, 0.1),
+    (0.902, 1.0, 0.1),
+    (1.32, 2.0, 0.3),
+    (0.72, -1.0, 0.3),
+]
 
-
-@pytest.fixture
-def batch(rng):
-    logp_old = rng.normal(-1.0, 0.6, len(RATIOS))
-    advantages = rng.choice([-1.0, 1.0], len(RATIOS)) * rng.uniform(0.2, 2.0, len(RATIOS))
-    return np.log(RATIOS) + logp_old, logp_old, advantages
+# (r, ε) for the clip fraction of one sample: plain cases first, then the windows
+FRACTION_CASES = [(1.5, 0.2), (0.5, 0.2), (1.0, 0.2), (1.15, 0.1), (1.25, 0.3)] + [
+    (1.21, 0.2),
+    (0.81, 0.2),
+    (1.103, 0.1),
+    (0.902, 0.1),
+    (1.32, 0.3),
+    (0.72, 0.3),
+]
 
 
 def clip(r, low, high):
     return low if r < low else high if r > high else r
 
 
-@pytest.mark.parametrize("epsilon", [0.1, 0.2, 0.3])
-def test_clipped_surrogate_value_and_gradient(student, batch, epsilon):
-    logp, logp_old, advantages = batch
-    value, grad = call_checking_inputs(
-        student.clipped_surrogate, "clipped_surrogate", logp, logp_old, advantages, epsilon
+@pytest.mark.parametrize("ratio, advantage, epsilon", SINGLE, ids=[f"r={r}-A={a}-eps={e}" for r, a, e in SINGLE])
+def test_clipped_surrogate_one_sample(student, ratio, advantage, epsilon):
+    logp_old = np.array([-1.3])
+    value, grad = student.clipped_surrogate(np.log([ratio]) + logp_old, logp_old, np.array([advantage]), epsilon)
+    sample = f"one sample with r = {ratio}, Â = {advantage}, ε = {epsilon}"
+    place = where_is_ratio(ratio, epsilon)
+    inside = abs(ratio - 1) < epsilon
+    inverse = 1 / ratio
+    swapped = "r computed as π_old/π (log π and log π_old swapped)"
+    fixed = "ε fixed at 0.2 (the epsilon argument ignored)"
+    value_mistakes = {
+        fixed: clip(ratio, 0.8, 1.2) * advantage if epsilon != 0.2 else None,
+        swapped: clip(inverse, 1 - epsilon, 1 + epsilon) * advantage,
+        "r Â, the ratio unclipped": ratio * advantage,
+    }
+    expected_value = clip(ratio, 1 - epsilon, 1 + epsilon) * advantage
+    why = f"clip(r, 1 − ε, 1 + ε) Â, r is {place}"
+    expect_number(
+        value, expected_value, "clipped_surrogate", f"the value for {sample}", why, alternatives=value_mistakes
     )
-    expected = sum(clip(r, 1 - epsilon, 1 + epsilon) * a for r, a in zip(RATIOS, advantages)) / len(RATIOS)
-    check_close(check_scalar(value, "clipped_surrogate"), expected, "clipped_surrogate", "the value Ê[clip(r) Â]")
-    check_array(grad, "clipped_surrogate", (len(RATIOS),), "the gradient")
-    numeric = numerical_gradient(
-        lambda: float(student.clipped_surrogate(logp, logp_old, advantages, epsilon)[0]), logp, 1e-7
-    )
-    check_close(grad, numeric, "clipped_surrogate", "∂/∂ log π (checked by finite differences of the value)")
-
-
-def test_clipped_surrogate_gradient_vanishes_outside_the_band(student, batch):
-    logp, logp_old, advantages = batch
-    _, grad = student.clipped_surrogate(logp, logp_old, advantages, 0.2)
-    outside = np.abs(RATIOS - 1) > 0.2
-    assert np.all(grad[outside] == 0), "clipped_surrogate: the gradient should be 0 where r is outside [1−ε, 1+ε]"
-    check_close(
-        grad[~outside],
-        (RATIOS * advantages)[~outside] / len(RATIOS),
-        "clipped_surrogate",
-        "the gradient inside the band (it should be r_t Â_t / n)",
+    check_array(grad, "clipped_surrogate", (1,), f"the gradient for {sample}")
+    grad_mistakes = {
+        fixed: (ratio * advantage if abs(ratio - 1) < 0.2 else 0.0) if epsilon != 0.2 else None,
+        swapped: inverse * advantage if abs(inverse - 1) < epsilon else 0.0,
+        "the gradient of the unclipped r Â, as if the clip were not there": None if inside else ratio * advantage,
+    }
+    why = f"r Â, since r is {place}" if inside else f"clip(r) is a constant there: r is {place}"
+    expected_grad = ratio * advantage if inside else 0.0
+    expect_number(
+        grad, expected_grad, "clipped_surrogate", f"the gradient for {sample}", why, alternatives=grad_mistakes
     )
 
 
-def test_clipped_surrogate_single_sample(student):
-    for ratio, expected_value, expected_grad in [(1.5, 1.2, 0.0), (0.9, 0.9, 0.9), (0.5, 0.8, 0.0)]:
-        value, grad = student.clipped_surrogate(np.log([ratio]), np.zeros(1), np.ones(1), 0.2)
-        check_close(
-            check_scalar(value, "clipped_surrogate"),
-            expected_value,
-            "clipped_surrogate",
-            f"the value for one sample with r = {ratio}, Â = 1",
-        )
-        check_close(grad, [expected_grad], "clipped_surrogate", f"the gradient for one sample with r = {ratio}, Â = 1")
-
-
-def test_clip_fraction_counts_ratios_outside_the_band(student, batch):
-    logp, logp_old, _ = batch
-    for epsilon in (0.1, 0.2, 0.3):
-        fraction = call_checking_inputs(student.clip_fraction, "clip_fraction", logp, logp_old, epsilon)
-        count = sum(1 for r in RATIOS if r < 1 - epsilon or r > 1 + epsilon)
-        check_close(
-            check_scalar(fraction, "clip_fraction"),
-            count / len(RATIOS),
-            "clip_fraction",
-            f"the fraction outside the band for ε = {epsilon}",
-        )
+@pytest.mark.parametrize("ratio, epsilon", FRACTION_CASES)
+def test_clip_fraction_of_one_sample(student, ratio, epsilon):
+    fraction = check_scalar(student.clip_fraction(np.log([ratio]), np.zeros(1), epsilon), "clip_fraction")
+    expected = float(abs(ratio - 1) > epsilon)
+    assert fraction == expected, (
+        f"clip_fraction: for one sample with r = {ratio} and ε = {epsilon}, the fraction should be {expected:g}, not "
+        f"{fraction:.6g} (r is {where_is_ratio(ratio, epsilon)})"
+    )
 
 
 def test_clip_fraction_extremes(student):
@@ -91,5 +114,66 @@ def test_clip_fraction_extremes(student):
         check_scalar(student.clip_fraction(logp, np.zeros(4), 0.2), "clip_fraction"),
         1.0,
         "clip_fraction",
-        "the fraction when every ratio is far outside the band on either side",
+        "the fraction when every ratio is far outside the band on either side (a fraction of the batch, in [0, 1])",
     )
+
+
+@pytest.fixture
+def batch(rng):
+    logp_old = rng.normal(-1.0, 0.6, len(RATIOS))
+    advantages = rng.choice([-1.0, 1.0], len(RATIOS)) * rng.uniform(0.2, 2.0, len(RATIOS))
+    return np.log(RATIOS) + logp_old, logp_old, advantages
+
+
+def test_clipped_surrogate_gradient_vanishes_outside_the_band(student, batch):
+    logp, logp_old, advantages = batch
+    _, grad = student.clipped_surrogate(logp, logp_old, advantages, 0.2)
+    check_array(grad, "clipped_surrogate", (len(RATIOS),), "the gradient")
+    outside = np.abs(RATIOS - 1) > 0.2
+    expected = np.where(outside, 0.0, RATIOS * advantages) / len(RATIOS)
+    check_close(
+        grad,
+        expected,
+        "clipped_surrogate",
+        "the gradient (r_t Â_t / n inside the band, 0 outside, with ε = 0.2)",
+        where=lambda i: f"r_t = {RATIOS[i]}, Â_t = {advantages[i]:.4g}: {where_is_ratio(RATIOS[i], 0.2)}",
+    )
+
+
+@pytest.mark.parametrize("epsilon", [0.1, 0.2, 0.3])
+def test_clipped_surrogate_value_and_gradient(student, batch, epsilon):
+    logp, logp_old, advantages = batch
+    value, grad = call_checking_inputs(
+        student.clipped_surrogate, "clipped_surrogate", logp, logp_old, advantages, epsilon
+    )
+    expected = sum(clip(r, 1 - epsilon, 1 + epsilon) * a for r, a in zip(RATIOS, advantages)) / len(RATIOS)
+    check_close(
+        check_scalar(value, "clipped_surrogate"),
+        expected,
+        "clipped_surrogate",
+        f"the value Ê[clip(r) Â], ε = {epsilon}",
+    )
+    check_array(grad, "clipped_surrogate", (len(RATIOS),), "the gradient")
+    numeric = numerical_gradient(
+        lambda: float(student.clipped_surrogate(logp, logp_old, advantages, epsilon)[0]), logp, 1e-7
+    )
+    check_close(
+        grad,
+        numeric,
+        "clipped_surrogate",
+        f"∂/∂ log π (checked by finite differences of the value), ε = {epsilon}",
+        where=lambda i: f"r_t = {RATIOS[i]}, Â_t = {advantages[i]:.4g}: {where_is_ratio(RATIOS[i], epsilon)}",
+    )
+
+
+def test_clip_fraction_counts_ratios_outside_the_band(student, batch):
+    logp, logp_old, _ = batch
+    for epsilon in (0.1, 0.2, 0.3):
+        fraction = call_checking_inputs(student.clip_fraction, "clip_fraction", logp, logp_old, epsilon)
+        count = sum(1 for r in RATIOS if r < 1 - epsilon or r > 1 + epsilon)
+        check_close(
+            check_scalar(fraction, "clip_fraction"),
+            count / len(RATIOS),
+            "clip_fraction",
+            f"the fraction outside the band for ε = {epsilon} ({count} of {len(RATIOS)} ratios: {RATIOS.tolist()})",
+        )

@@ -1,12 +1,21 @@
 """Grading chapter 6: L^CLIP against a per-sample min, its pessimism, and where its gradient must and must not vanish.
 
 A clipped term without the min, a max in its place, or a min over the ratios instead of the products all fail here.
+Tests run from the most specific (one sample) to the most general, so the first failure names the mistake.
 """
 
 import _harness
 import numpy as np
 import pytest
-from _harness import call_checking_inputs, check_array, check_close, check_scalar, numerical_gradient
+from _harness import (
+    call_checking_inputs,
+    check_array,
+    check_close,
+    check_scalar,
+    expect_number,
+    numerical_gradient,
+    where_is_ratio,
+)
 
 student = _harness.student  # the fixture: the implementation under test (see _harness.py)
 pytest_generate_tests = _harness.pytest_generate_tests  # one run per wrong variant under MINIPPO_IMPL=wrong
@@ -14,8 +23,92 @@ rng = _harness.rng  # a seeded NumPy Generator
 
 pytestmark = pytest.mark.timeout(10)
 
-RATIOS = np.array([0.4, 0.65, 0.75, 0.86, 0.95, 1.0, 1.04, 1.15, 1.26, 1.35, 1.7, 2.5])
-SIGNS = np.array([1, -1, 1, -1, 1, -1, 1, -1, 1, -1, 1, -1, -1, 1, -1, 1, -1, 1, -1, 1, -1, 1, -1, 1])
+# away from the band's edges, with one ratio in each window between 1 ± ε and e^±ε for ε = 0.1, 0.2, 0.3
+RATIOS = np.array([0.4, 0.65, 0.72, 0.75, 0.81, 0.86, 0.902, 0.95, 1.0, 1.04, 1.103, 1.15, 1.21, 1.26, 1.32, 1.7, 2.5])
+SIGNS = np.concatenate([np.where(np.arange(len(RATIOS)) % 2, -1, 1), np.where(np.arange(len(RATIOS)) % 2, 1, -1)])
+
+
+SINGLE = [
+    (1.1, 2.0, 0.2, "inside"),
+    (0.9, -1.0, 0.2, "inside"),
+    (1.5, 1.0, 0.2, "above the band with Â > 0: the clip holds it, nothing more to gain"),
+    (1.5, -1.0, 0.2, "above the band with Â < 0: the move hurts, so the unclipped term is the min"),
+    (0.5, -1.0, 0.2, "below the band with Â < 0: the clip holds it, nothing more to gain"),
+    (0.5, 1.0, 0.2, "below the band with Â > 0: the move hurts, so the unclipped term is the min"),
+    (1.15, 1.0, 0.1, "above the band with Â > 0"),
+    (0.75, -1.0, 0.2, "below the band with Â < 0"),
+    (1.25, 1.0, 0.3, "inside"),
+    (1.21, 1.0, 0.2, "above the band with Â > 0"),
+    (0.81, -1.0, 0.2, "inside"),
+    (1.103, 2.0, 0.1, "above the band with Â > 0"),
+    (0.902, -1.0, 0.1, "inside"),
+    (0.72, -1.0, 0.3, "inside"),
+    (1.32, 1.0, 0.3, "above the band with Â > 0"),
+]
+
+
+def per_sample_min(ratio, advantage, epsilon):
+    clipped = min(max(ratio, 1 - epsilon), 1 + epsilon)
+    return min(ratio * advantage, clipped * advantage)
+
+
+@pytest.mark.parametrize(
+    "ratio, advantage, epsilon, case", SINGLE, ids=[f"r={r}-A={a}-eps={e}" for r, a, e, _ in SINGLE]
+)
+def test_clip_objective_one_sample(student, ratio, advantage, epsilon, case):
+    value, grad = student.clip_objective(np.log([ratio]) - 1.3, np.array([-1.3]), np.array([advantage]), epsilon)
+    sample = f"one sample with r = {ratio}, Â = {advantage}, ε = {epsilon}"
+    place = f"r is {where_is_ratio(ratio, epsilon)}; {case}"
+    clipped_is_min = (ratio > 1 + epsilon and advantage > 0) or (ratio < 1 - epsilon and advantage < 0)
+    check_array(grad, "clip_objective", (1,), f"the gradient for {sample}")
+    expected_grad = 0.0 if clipped_is_min else ratio * advantage
+    why = f"the clipped term is the min, and it is flat: {place}" if clipped_is_min else f"r Â: {place}"
+    clipped = min(max(ratio, 1 - epsilon), 1 + epsilon)
+    inverse = 1 / ratio
+    swapped = "r computed as π_old/π (log π and log π_old swapped)"
+    inverse_flat = (inverse > 1 + epsilon and advantage > 0) or (inverse < 1 - epsilon and advantage < 0)
+    fixed_flat = (ratio > 1.2 and advantage > 0) or (ratio < 0.8 and advantage < 0)
+    grad_mistakes = {
+        "ε fixed at 0.2 (the epsilon argument ignored)": (0.0 if fixed_flat else ratio * advantage)
+        if epsilon != 0.2
+        else None,
+        swapped: 0.0 if inverse_flat else inverse * advantage,
+        "the gradient of the clipped term alone (no min): it vanishes outside the band also where the move hurts": (
+            ratio * advantage if abs(ratio - 1) < epsilon else 0.0
+        ),
+    }
+    value_mistakes = {
+        "ε fixed at 0.2 (the epsilon argument ignored)": per_sample_min(ratio, advantage, 0.2)
+        if epsilon != 0.2
+        else None,
+        swapped: per_sample_min(inverse, advantage, epsilon),
+        "max(r Â, clip(r) Â), the optimistic bound; L^CLIP takes the min": max(ratio, clipped) * advantage
+        if advantage > 0
+        else min(ratio, clipped) * advantage,
+        "the clipped term alone (no min with r Â)": clipped * advantage,
+        "min(r, clip(r)) Â: the min taken over the ratios, before multiplying by Â": min(ratio, clipped) * advantage,
+    }
+    expect_number(value, per_sample_min(ratio, advantage, epsilon), "clip_objective", f"the value for {sample}", place,
+                  alternatives=value_mistakes)  # fmt: skip
+    expect_number(grad, expected_grad, "clip_objective", f"the gradient for {sample}", why, alternatives=grad_mistakes)
+
+
+def test_clip_objective_with_log_probs_near_minus_900(student):
+    logp, logp_old = np.array([-899.9, -900.2, -1000.0]), np.array([-900.0, -900.0, -1000.0])
+    value, grad = student.clip_objective(logp, logp_old, np.array([1.0, -1.0, 2.0]), 0.2)
+    ratios = np.exp(logp - logp_old)
+    check_array(
+        grad, "clip_objective", (3,), "the gradient for log-probabilities near −900 (r = exp(log π − log π_old))"
+    )
+    check_close(
+        grad,
+        ratios * np.array([1.0, -1.0, 2.0]) / 3,
+        "clip_objective",
+        "the gradient for log-probabilities near −900, where exp(log π) underflows to 0: compute r as "
+        "exp(log π − log π_old)",
+    )
+    check_close(check_scalar(value, "clip_objective"), float(np.mean(ratios * [1.0, -1.0, 2.0])), "clip_objective",
+                "the value for log-probabilities near −900")  # fmt: skip
 
 
 @pytest.fixture
@@ -25,26 +118,6 @@ def batch(rng):
     logp_old = rng.normal(-1.0, 0.6, len(ratios))
     advantages = SIGNS * rng.uniform(0.2, 2.0, len(ratios))
     return np.log(ratios) + logp_old, logp_old, advantages, ratios
-
-
-def per_sample_min(ratio, advantage, epsilon):
-    clipped = min(max(ratio, 1 - epsilon), 1 + epsilon)
-    return min(ratio * advantage, clipped * advantage)
-
-
-@pytest.mark.parametrize("epsilon", [0.1, 0.2, 0.3])
-def test_clip_objective_value_and_gradient(student, batch, epsilon):
-    logp, logp_old, advantages, ratios = batch
-    value, grad = call_checking_inputs(student.clip_objective, "clip_objective", logp, logp_old, advantages, epsilon)
-    expected = np.mean([per_sample_min(r, a, epsilon) for r, a in zip(ratios, advantages)])
-    check_close(
-        check_scalar(value, "clip_objective"), expected, "clip_objective", "the value Ê[min(r Â, clip(r, 1−ε, 1+ε) Â)]"
-    )
-    check_array(grad, "clip_objective", (len(ratios),), "the gradient")
-    numeric = numerical_gradient(
-        lambda: float(student.clip_objective(logp, logp_old, advantages, epsilon)[0]), logp, 1e-7
-    )
-    check_close(grad, numeric, "clip_objective", "∂L^CLIP/∂ log π (checked by finite differences of the value)")
 
 
 def test_clip_objective_is_never_above_the_unclipped_objective(student):
@@ -108,14 +181,22 @@ def test_clip_objective_equals_cpi_inside_the_band(student, rng):
     check_close(grad, ratios * advantages / 8, "clip_objective", "the gradient inside the band (r_t Â_t / n)")
 
 
-@pytest.mark.parametrize(
-    "ratio, advantage, expected_value, expected_grad",
-    [(1.5, 1.0, 1.2, 0.0), (1.5, -1.0, -1.5, -1.5), (0.5, -1.0, -0.8, 0.0), (0.5, 1.0, 0.5, 0.5), (1.1, 2.0, 2.2, 2.2)],
-    ids=["above-helped", "above-hurt", "below-helped", "below-hurt", "inside"],
-)
-def test_clip_objective_single_sample(student, ratio, advantage, expected_value, expected_grad):
-    value, grad = student.clip_objective(np.log([ratio]) - 900.0, np.array([-900.0]), np.array([advantage]), 0.2)
-    where = f"one sample with r = {ratio}, Â = {advantage} (log-probabilities near −900)"
-    check_close(check_scalar(value, "clip_objective"), expected_value, "clip_objective", f"the value for {where}")
-    check_array(grad, "clip_objective", (1,), f"the gradient for {where}")
-    check_close(grad, [expected_grad], "clip_objective", f"the gradient for {where}")
+@pytest.mark.parametrize("epsilon", [0.1, 0.2, 0.3])
+def test_clip_objective_value_and_gradient(student, batch, epsilon):
+    logp, logp_old, advantages, ratios = batch
+    value, grad = call_checking_inputs(student.clip_objective, "clip_objective", logp, logp_old, advantages, epsilon)
+    expected = np.mean([per_sample_min(r, a, epsilon) for r, a in zip(ratios, advantages)])
+    check_close(
+        check_scalar(value, "clip_objective"), expected, "clip_objective", "the value Ê[min(r Â, clip(r, 1−ε, 1+ε) Â)]"
+    )
+    check_array(grad, "clip_objective", (len(ratios),), "the gradient")
+    numeric = numerical_gradient(
+        lambda: float(student.clip_objective(logp, logp_old, advantages, epsilon)[0]), logp, 1e-7
+    )
+    check_close(
+        grad,
+        numeric,
+        "clip_objective",
+        f"∂L^CLIP/∂ log π (checked by finite differences of the value, ε = {epsilon})",
+        where=lambda i: f"r_t = {ratios[i]}, Â_t = {advantages[i]:.4g}: {where_is_ratio(ratios[i], epsilon)}",
+    )

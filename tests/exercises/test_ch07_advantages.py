@@ -1,10 +1,14 @@
 """Grading chapter 7: returns, TD residuals and GAE against brute-force sums over episodes, with episode ends inside
-the batch, terminated versus truncated steps, a truncated final step, several environments and one-step batches."""
+the batch, terminated versus truncated steps, a truncated or terminated final step, a step with both flags, several
+environments side by side (T, N), float32 inputs and one-step batches.
+
+Tests run from the most specific (one step, a short hand-worked batch) to the most general, so the first failure
+names the mistake; a wrong entry is shown with its step, its flags and where its episode ends."""
 
 import _harness
 import numpy as np
 import pytest
-from _harness import call_checking_inputs, check_array, check_close
+from _harness import call_checking_inputs, check_array, check_close, expect_number
 
 student = _harness.student  # the fixture: the implementation under test (see _harness.py)
 pytest_generate_tests = _harness.pytest_generate_tests  # one run per wrong variant under MINIPPO_IMPL=wrong
@@ -14,7 +18,7 @@ pytestmark = pytest.mark.timeout(10)
 GAMMA = 0.9
 
 
-def random_batch(rng, T=24, truncate_last=False):
+def random_batch(rng, T=24, truncate_last=False, terminate_last=False):
     """One environment, T steps: episodes end by termination at steps 5 and 17 and by truncation at step 11."""
     rewards, values = rng.normal(size=T), rng.normal(size=T)
     next_values = np.append(values[1:], rng.normal())
@@ -25,6 +29,9 @@ def random_batch(rng, T=24, truncate_last=False):
     next_values[[5, 17]] = 1e6  # after a termination there is no next state: this number must not be used
     if truncate_last:
         truncated[-1] = True
+    if terminate_last:
+        terminated[-1] = True
+        next_values[-1] = 1e6
     return rewards, values, next_values, terminated, truncated
 
 
@@ -33,6 +40,27 @@ def episode_end(t, terminated, truncated):
     while t < len(terminated) - 1 and not (terminated[t] or truncated[t]):
         t += 1
     return t
+
+
+def describe_step(terminated, truncated):
+    """For check_close's ``where``: the failing step, its flags, and where its episode ends."""
+
+    def describe(index):
+        t, column = int(index[0]), tuple(int(i) for i in index[1:])
+        term, trunc = terminated[(slice(None), *column)], truncated[(slice(None), *column)]
+        end = episode_end(t, term, trunc)
+        how = (
+            "by termination"
+            if term[end]
+            else "by truncation"
+            if trunc[end]
+            else "at the batch's end (cut by the horizon)"
+        )
+        role = f"this step ends its episode {how}" if end == t else f"its episode ends {how} at step {end}"
+        env = f" of environment {column[0]}" if column else ""
+        return f"step {t}{env}: terminated = {bool(term[t])}, truncated = {bool(trunc[t])}; {role}"
+
+    return describe
 
 
 def brute_force_returns(rewards, next_values, terminated, truncated, gamma):
@@ -60,12 +88,115 @@ def brute_force_gae(rewards, values, next_values, terminated, truncated, gamma, 
     return advantages
 
 
+# one step, and short batches worked by hand
+
+
+def test_returns_of_a_one_step_batch(student):
+    no = np.zeros(1, bool)
+    returns = student.discounted_returns(np.array([2.0]), np.array([10.0]), no, no, GAMMA)
+    check_array(returns, "discounted_returns", (1,), "G for a batch of one step")
+    expect_number(returns, 2.0 + GAMMA * 10.0, "discounted_returns", "G for one step cut by the horizon", "r + γ V")
+    ended = student.discounted_returns(np.array([2.0]), np.array([10.0]), np.ones(1, bool), no, GAMMA)
+    expect_number(ended, 2.0, "discounted_returns", "G for one step that terminated", "just r, no bootstrap")
+
+
+def test_returns_when_the_last_step_terminated(student):
+    terminated = np.array([False, False, True])
+    returns = student.discounted_returns(np.ones(3), np.array([0.0, 0.0, 1e6]), terminated, np.zeros(3, bool), 0.5)
+    check_array(returns, "discounted_returns", (3,), "G for a batch whose last step terminated")
+    check_close(
+        returns,
+        [1.75, 1.5, 1.0],
+        "discounted_returns",
+        "G for a batch whose last step terminated (no bootstrap there, even at the batch's end)",
+        where=describe_step(terminated, np.zeros(3, bool)),
+    )
+
+
+def test_td_residuals_of_a_short_batch(student):
+    terminated = np.array([False, True, False, False])
+    deltas = student.td_residuals(
+        np.array([1.0, 2.0, 3.0, 4.0]), np.array([0.5, 1.0, 1.5, 2.0]), np.array([1.0, 1e6, 2.0, 3.0]), terminated, 0.5
+    )
+    check_array(deltas, "td_residuals", (4,), "δ for a batch of four steps")
+    check_close(
+        deltas,
+        [1.0, 1.0, 2.5, 3.5],
+        "td_residuals",
+        "δ_t = r_t + γ V(s_{t+1}) − V(s_t) for four steps, γ = 0.5 (V(s_{t+1}) = 0 after the termination at step 1)",
+        where=describe_step(terminated, np.zeros(4, bool)),
+    )
+
+
+def test_a_step_both_terminated_and_truncated_counts_as_terminated(student):
+    terminated, truncated = np.array([False, True, False]), np.array([False, True, False])
+    rewards, next_values = np.ones(3), np.array([0.0, 1e6, 4.0])
+    returns = student.discounted_returns(rewards, next_values, terminated, truncated, 0.5)
+    check_close(
+        returns,
+        [1.5, 1.0, 3.0],
+        "discounted_returns",
+        "G when step 1 is both terminated and truncated (terminated wins: no bootstrap)",
+        where=describe_step(terminated, truncated),
+    )
+
+
+def test_gae_of_a_one_step_batch(student):
+    no = np.zeros(1, bool)
+    advantages = student.gae(np.array([1.0]), np.array([0.5]), np.array([2.0]), no, no, GAMMA, 0.95)
+    check_array(advantages, "gae", (1,), "Â for a batch of one step")
+    expect_number(advantages, 1.0 + GAMMA * 2.0 - 0.5, "gae", "Â for a batch of one step", "it is δ_0 = r + γ V′ − V")
+
+
+def test_gae_of_one_short_episode(student):
+    # no episode end inside: Â_2 = δ_2, Â_1 = δ_1 + γλ Â_2, Â_0 = δ_0 + γλ Â_1, with γλ = 0.45
+    no = np.zeros(3, bool)
+    rewards, values, next_values = np.array([1.0, 0.0, 2.0]), np.array([0.5, 1.0, 0.0]), np.array([1.0, 0.0, 2.0])
+    deltas = rewards + 0.9 * next_values - values  # 1.4, −1, 3.8
+    expected = [deltas[0] + 0.45 * (deltas[1] + 0.45 * deltas[2]), deltas[1] + 0.45 * deltas[2], deltas[2]]
+    advantages = student.gae(rewards, values, next_values, no, no, 0.9, 0.5)
+    check_array(advantages, "gae", (3,), "Â for one episode of three steps")
+    check_close(
+        advantages,
+        expected,
+        "gae",
+        "Â for one episode of three steps, γ = 0.9, λ = 0.5 (Â_t = δ_t + γλ Â_{t+1}, so the decay is γλ = 0.45)",
+        where=describe_step(no, no),
+    )
+
+
+def test_gae_stops_at_a_step_both_terminated_and_truncated(student):
+    terminated, truncated = np.array([False, True, False]), np.array([False, True, False])
+    advantages = student.gae(np.ones(3), np.zeros(3), np.array([0.0, 1e6, 4.0]), terminated, truncated, 0.5, 1.0)
+    check_close(
+        advantages,
+        [1.5, 1.0, 3.0],
+        "gae",
+        "Â when step 1 is both terminated and truncated (terminated wins: δ has no bootstrap)",
+        where=describe_step(terminated, truncated),
+    )
+
+
+def test_gae_bootstraps_a_truncated_final_step(student):
+    no = np.zeros(3, bool)
+    truncated = np.array([False, False, True])
+    advantages = student.gae(np.ones(3), np.zeros(3), np.array([0.0, 0.0, 5.0]), no, truncated, 0.5, 1.0)
+    check_close(
+        advantages,
+        [1.75 + 0.625, 1.5 + 1.25, 1.0 + 2.5],
+        "gae",
+        "Â for a batch whose last step was truncated (bootstrap from V of the final observation)",
+        where=describe_step(no, truncated),
+    )
+
+
 # discounted returns
 
 
-@pytest.mark.parametrize("truncate_last", [False, True], ids=["horizon-cut", "truncated-final-step"])
-def test_returns_match_the_sum_over_each_episode(student, rng, truncate_last):
-    rewards, _, next_values, terminated, truncated = random_batch(rng, truncate_last=truncate_last)
+@pytest.mark.parametrize("last", ["horizon-cut", "truncated", "terminated"])
+def test_returns_match_the_sum_over_each_episode(student, rng, last):
+    batch = random_batch(rng, truncate_last=last == "truncated", terminate_last=last == "terminated")
+    rewards, _, next_values, terminated, truncated = batch
     returns = call_checking_inputs(
         student.discounted_returns, "discounted_returns", rewards, next_values, terminated, truncated, GAMMA
     )
@@ -77,18 +208,8 @@ def test_returns_match_the_sum_over_each_episode(student, rng, truncate_last):
         "discounted_returns",
         "G_t (summed to the end of each episode, bootstrapped where "
         "it was truncated or the batch ends, not after a termination)",
+        where=describe_step(terminated, truncated),
     )
-
-
-def test_returns_of_a_one_step_batch(student):
-    no = np.zeros(1, bool)
-    returns = student.discounted_returns(np.array([2.0]), np.array([10.0]), no, no, GAMMA)
-    check_close(returns, [2.0 + GAMMA * 10.0], "discounted_returns", "G for one step cut by the horizon (r + γ V)")
-    ended = student.discounted_returns(np.array([2.0]), np.array([10.0]), np.ones(1, bool), no, GAMMA)
-    check_close(ended, [2.0], "discounted_returns", "G for one step that terminated (just r)")
-
-
-# TD residuals
 
 
 def test_td_residuals_match_the_definition(student, rng):
@@ -97,7 +218,11 @@ def test_td_residuals_match_the_definition(student, rng):
     check_array(deltas, "td_residuals", (24,))
     expected = brute_force_deltas(rewards, values, next_values, terminated, GAMMA)
     check_close(
-        deltas, expected, "td_residuals", "δ_t = r_t + γ V(s_{t+1}) − V(s_t), with V(s_{t+1}) = 0 after a termination"
+        deltas,
+        expected,
+        "td_residuals",
+        "δ_t = r_t + γ V(s_{t+1}) − V(s_t), with V(s_{t+1}) = 0 after a termination",
+        where=describe_step(terminated, np.zeros_like(terminated)),
     )
 
 
@@ -125,7 +250,11 @@ def test_gae_matches_the_sum_over_each_episode(student, rng, lam):
     check_array(advantages, "gae", (24,))
     expected = brute_force_gae(*batch, GAMMA, lam)
     check_close(
-        advantages, expected, "gae", f"Â_t for λ = {lam} (Σ (γλ)^l δ_(t+l), stopping at the end of t's episode)"
+        advantages,
+        expected,
+        "gae",
+        f"Â_t for λ = {lam} (Σ (γλ)^l δ_(t+l), stopping at the end of t's episode)",
+        where=describe_step(batch[3], batch[4]),
     )
 
 
@@ -151,16 +280,63 @@ def test_gae_does_not_flow_across_episode_ends(student, rng):
     )
 
 
-def test_gae_bootstraps_a_truncated_final_step(student):
-    no = np.zeros(3, bool)
-    truncated = np.array([False, False, True])
-    advantages = student.gae(np.ones(3), np.zeros(3), np.array([0.0, 0.0, 5.0]), no, truncated, 0.5, 1.0)
-    check_close(
-        advantages,
-        [1.75 + 0.625, 1.5 + 1.25, 1.0 + 2.5],
-        "gae",
-        "Â for a batch whose last step was truncated (bootstrap from V of the final observation)",
+def stacked_batch(rng):
+    """Three environments side by side, shape (T, N) = (24, 3), whose episodes end at different steps."""
+    columns = [[np.roll(x, 4 * i) for x in random_batch(rng)] for i in range(3)]
+    stacked = [np.stack([c[i] for c in columns], axis=1) for i in range(5)]
+    stacked[3][2, 1] = True  # a termination in one environment only
+    stacked[2][2, 1] = 1e6
+    return stacked
+
+
+def test_returns_for_several_environments(student, rng):
+    rewards, values, next_values, terminated, truncated = stacked_batch(rng)
+    returns = call_checking_inputs(
+        student.discounted_returns, "discounted_returns", rewards, next_values, terminated, truncated, GAMMA
     )
+    check_array(returns, "discounted_returns", (24, 3), "G for a batch of shape (T, N) = (24, 3)")
+    for i in range(3):
+        expected = brute_force_returns(rewards[:, i], next_values[:, i], terminated[:, i], truncated[:, i], GAMMA)
+        check_close(
+            returns[:, i],
+            expected,
+            "discounted_returns",
+            f"G of environment {i} in a (T, N) batch (each column has its own episode ends)",
+            where=describe_step(terminated[:, i], truncated[:, i]),
+        )
+
+
+def test_td_residuals_for_several_environments(student, rng):
+    rewards, values, next_values, terminated, _ = stacked_batch(rng)
+    deltas = call_checking_inputs(student.td_residuals, "td_residuals", rewards, values, next_values, terminated, GAMMA)
+    check_array(deltas, "td_residuals", (24, 3), "δ for a batch of shape (T, N) = (24, 3)")
+    expected = np.stack(
+        [brute_force_deltas(rewards[:, i], values[:, i], next_values[:, i], terminated[:, i], GAMMA) for i in range(3)],
+        axis=1,
+    )
+    check_close(
+        deltas,
+        expected,
+        "td_residuals",
+        "δ in a (T, N) batch",
+        where=describe_step(terminated, np.zeros_like(terminated)),
+    )
+
+
+@pytest.mark.parametrize("function", ["discounted_returns", "td_residuals", "gae"])
+def test_float32_inputs_give_float64_results(student, rng, function):
+    """The rollout may store float32; the contract returns float64 whatever the inputs' float type."""
+    rewards, values, next_values, terminated, truncated = (
+        x.astype(np.float32) if x.dtype.kind == "f" else x for x in random_batch(rng)
+    )
+    next_values[[5, 17]] = 0.0
+    if function == "discounted_returns":
+        result = student.discounted_returns(rewards, next_values, terminated, truncated, GAMMA)
+    elif function == "td_residuals":
+        result = student.td_residuals(rewards, values, next_values, terminated, GAMMA)
+    else:
+        result = student.gae(rewards, values, next_values, terminated, truncated, GAMMA, 0.95)
+    check_array(result, function, (24,), "the result for float32 inputs (it should still be float64)")
 
 
 def test_gae_for_several_environments(student, rng):
@@ -172,11 +348,10 @@ def test_gae_for_several_environments(student, rng):
     check_array(advantages, "gae", (24, 3), "Â for a batch of shape (T, N) = (24, 3)")
     for i in range(3):
         expected = brute_force_gae(*(x[:, i] for x in stacked), GAMMA, 0.95)
-        check_close(advantages[:, i], expected, "gae", f"Â of environment {i} in a (T, N) batch")
-
-
-def test_gae_of_a_one_step_batch(student):
-    no = np.zeros(1, bool)
-    advantages = student.gae(np.array([1.0]), np.array([0.5]), np.array([2.0]), no, no, GAMMA, 0.95)
-    check_array(advantages, "gae", (1,), "Â for a batch of one step")
-    check_close(advantages, [1.0 + GAMMA * 2.0 - 0.5], "gae", "Â for a batch of one step (it is δ_0)")
+        check_close(
+            advantages[:, i],
+            expected,
+            "gae",
+            f"Â of environment {i} in a (T, N) batch",
+            where=describe_step(stacked[3][:, i], stacked[4][:, i]),
+        )

@@ -4,13 +4,47 @@ and the signs each term must have."""
 import _harness
 import numpy as np
 import pytest
-from _harness import call_checking_inputs, check_array, check_close, check_scalar, numerical_gradient
+from _harness import call_checking_inputs, check_array, check_close, check_scalar, expect_number, numerical_gradient
 
 student = _harness.student  # the fixture: the implementation under test (see _harness.py)
 pytest_generate_tests = _harness.pytest_generate_tests  # one run per wrong variant under MINIPPO_IMPL=wrong
 rng = _harness.rng  # a seeded NumPy Generator
 
 pytestmark = pytest.mark.timeout(10)
+
+
+# (V, V_old, V^targ, ε) for one sample, and what happens there
+VALUE_CASES = [
+    (0.5, 0.0, 1.0, 0.2, "V moved 0.5 > ε toward the target: the clipped error is larger, and V^clip is flat there"),
+    (-0.5, 0.0, 1.0, 0.2, "V moved 0.5 > ε away from the target: the unclipped error is larger"),
+    (0.1, 0.0, 1.0, 0.2, "V moved 0.1 < ε: V^clip = V, the two errors are equal"),
+    (2.0, 1.0, 0.0, 0.4, "V moved 1 > ε away from the target: the unclipped error is larger"),
+    (0.3, 1.0, 0.0, 0.4, "V moved 0.7 > ε toward the target: the clipped error is larger, and V^clip is flat there"),
+]
+
+
+@pytest.mark.parametrize("v, v_old, target, epsilon, case", VALUE_CASES, ids=[str(i) for i in range(len(VALUE_CASES))])
+def test_clipped_value_loss_one_sample(student, v, v_old, target, epsilon, case):
+    loss, grad = student.clipped_value_loss(np.array([v]), np.array([target]), np.array([v_old]), epsilon)
+    clipped = v_old + min(max(v - v_old, -epsilon), epsilon)
+    error, clipped_error = v - target, clipped - target
+    sample = f"one sample with V = {v}, V_old = {v_old}, V^targ = {target}, ε = {epsilon}"
+    expected_loss = 0.5 * max(error**2, clipped_error**2)
+    loss_mistakes = {
+        "the smaller of the two errors (min): the clipped loss is pessimistic, it takes the max": 0.5
+        * min(error**2, clipped_error**2),
+        "ε fixed at 0.2 (the epsilon argument ignored)": None
+        if epsilon == 0.2
+        else 0.5 * max(error**2, (v_old + min(max(v - v_old, -0.2), 0.2) - target) ** 2),
+    }
+    expect_number(loss, expected_loss, "clipped_value_loss", f"the loss for {sample}", case, alternatives=loss_mistakes)
+    check_array(grad, "clipped_value_loss", (1,), f"the gradient for {sample}")
+    use_clipped = clipped_error**2 > error**2
+    expected_grad = 0.0 if use_clipped else error
+    grad_mistakes = {"the clipped branch's error passed on outside the band, where V^clip is a constant": clipped_error}
+    expect_number(
+        grad, expected_grad, "clipped_value_loss", f"the gradient for {sample}", case, alternatives=grad_mistakes
+    )
 
 
 @pytest.mark.parametrize("n", [1, 7])
@@ -36,26 +70,34 @@ def reference_clipped_value_loss(values, targets, values_old, epsilon):
 def value_batch(rng):
     # V moved by 0.05 … 0.9 from V_old, in both directions; ε = 0.2 with no sample near the edges of the band
     values_old = rng.normal(size=12)
-    moves = np.array([0.05, -0.1, 0.15, -0.05, 0.5, -0.6, 0.9, -0.3, 0.35, -0.45, 0.12, -0.7])
+    moves = np.array([0.05, -0.1, 0.15, -0.05, 0.5, -0.6, 0.9, -0.3, 0.35, -0.45, 0.12, -0.7])  # clear of ±0.2, ±0.4
     targets = values_old + rng.normal(0, 0.6, 12)
     return values_old + moves, targets, values_old
 
 
-def test_clipped_value_loss_value_and_gradient(student, value_batch):
+@pytest.mark.parametrize("epsilon", [0.2, 0.4])
+def test_clipped_value_loss_value_and_gradient(student, value_batch, epsilon):
     values, targets, values_old = value_batch
     loss, grad = call_checking_inputs(
-        student.clipped_value_loss, "clipped_value_loss", values, targets, values_old, 0.2
+        student.clipped_value_loss, "clipped_value_loss", values, targets, values_old, epsilon
     )
-    expected = reference_clipped_value_loss(values, targets, values_old, 0.2)
+    expected = reference_clipped_value_loss(values, targets, values_old, epsilon)
     check_close(
         check_scalar(loss, "clipped_value_loss"),
         expected,
         "clipped_value_loss",
-        "the loss ½ Ê[max((V − V^targ)², (V^clip − V^targ)²)]",
+        f"the loss ½ Ê[max((V − V^targ)², (V^clip − V^targ)²)], ε = {epsilon}",
     )
     check_array(grad, "clipped_value_loss", (12,), "the gradient")
-    numeric = numerical_gradient(lambda: reference_clipped_value_loss(values, targets, values_old, 0.2), values)
-    check_close(grad, numeric, "clipped_value_loss", "∂L/∂V (checked by finite differences)")
+    numeric = numerical_gradient(lambda: reference_clipped_value_loss(values, targets, values_old, epsilon), values)
+    moves = values - values_old
+    check_close(
+        grad,
+        numeric,
+        "clipped_value_loss",
+        f"∂L/∂V (checked by finite differences), ε = {epsilon}",
+        where=lambda i: f"V − V_old = {moves[i]:.3g}, V − V^targ = {values[i] - targets[i]:.3g}",
+    )
 
 
 def test_clipped_value_loss_is_never_below_the_plain_loss(student, value_batch):
@@ -91,7 +133,7 @@ def reference_objective(logp, logp_old, advantages, values, targets, entropy, ep
 def objective_batch(rng):
     n = 9
     logp_old = rng.normal(-1.2, 0.4, n)
-    ratios = np.array([0.5, 0.7, 0.9, 1.0, 1.1, 1.3, 1.6, 0.95, 1.05])
+    ratios = np.array([0.5, 0.7, 0.9, 1.0, 1.1, 1.3, 1.6, 1.21, 0.81])  # 1.21 and 0.81: between 1 ± ε and e^±ε
     return (
         np.log(ratios) + logp_old,
         logp_old,
@@ -100,33 +142,6 @@ def objective_batch(rng):
         rng.normal(size=n),
         rng.uniform(0.1, 1.0, n),
     )
-
-
-@pytest.mark.parametrize("c1, c2", [(0.5, 0.01), (1.0, 0.0), (2.0, 0.5)])
-def test_clip_vf_s_objective_value_and_gradients(student, objective_batch, c1, c2):
-    logp, logp_old, advantages, values, targets, entropy = objective_batch
-    args = (logp, logp_old, advantages, values, targets, entropy, 0.2, c1, c2)
-    value, grad_logp, grad_values, grad_entropy = call_checking_inputs(
-        student.clip_vf_s_objective, "clip_vf_s_objective", *args
-    )
-    check_close(
-        check_scalar(value, "clip_vf_s_objective"),
-        reference_objective(*args),
-        "clip_vf_s_objective",
-        f"the value L^CLIP − c1 L^VF + c2 S (c1 = {c1}, c2 = {c2})",
-    )
-    for grad, variable, what in [
-        (grad_logp, logp, "∂L/∂ log π"),
-        (grad_values, values, "∂L/∂V"),
-        (grad_entropy, entropy, "∂L/∂S"),
-    ]:
-        check_array(grad, "clip_vf_s_objective", (9,), what)
-        check_close(
-            grad,
-            numerical_gradient(lambda: float(reference_objective(*args)), variable, 1e-7),
-            "clip_vf_s_objective",
-            f"{what} (checked by finite differences, c1 = {c1}, c2 = {c2})",
-        )
 
 
 def test_clip_vf_s_objective_signs(student):
@@ -143,3 +158,40 @@ def test_clip_vf_s_objective_signs(student):
     assert check_scalar(wider[0], "clip_vf_s_objective") > check_scalar(base[0], "clip_vf_s_objective"), (
         "clip_vf_s_objective: a higher entropy should raise the objective (the bonus enters with +c2)"
     )
+
+
+@pytest.mark.parametrize("c1, c2, epsilon", [(0.5, 0.01, 0.2), (1.0, 0.0, 0.2), (2.0, 0.5, 0.2), (0.5, 0.01, 0.35)])
+def test_clip_vf_s_objective_value_and_gradients(student, objective_batch, c1, c2, epsilon):
+    logp, logp_old, advantages, values, targets, entropy = objective_batch
+    args = (logp, logp_old, advantages, values, targets, entropy, epsilon, c1, c2)
+    value, grad_logp, grad_values, grad_entropy = call_checking_inputs(
+        student.clip_vf_s_objective, "clip_vf_s_objective", *args
+    )
+    logp, logp_old, advantages, values, targets, entropy = objective_batch
+    mistakes = {
+        "ε fixed at 0.2 (the epsilon argument ignored)": None
+        if epsilon == 0.2
+        else reference_objective(*args[:6], 0.2, c1, c2),
+        "the value loss added (+c1 L^VF); it enters with a minus": reference_objective(*args[:7], -c1, c2),
+        "the entropy bonus subtracted (−c2 S); it enters with a plus": reference_objective(*args[:7], c1, -c2),
+        "c1 and c2 swapped": reference_objective(*args[:7], c2, c1),
+    }
+    expect_number(
+        value,
+        reference_objective(*args),
+        "clip_vf_s_objective",
+        f"the value L^CLIP − c1 L^VF + c2 S (c1 = {c1}, c2 = {c2}, ε = {epsilon})",
+        alternatives=mistakes,
+    )
+    for grad, variable, what in [
+        (grad_logp, logp, "∂L/∂ log π"),
+        (grad_values, values, "∂L/∂V"),
+        (grad_entropy, entropy, "∂L/∂S"),
+    ]:
+        check_array(grad, "clip_vf_s_objective", (9,), what)
+        check_close(
+            grad,
+            numerical_gradient(lambda: float(reference_objective(*args)), variable, 1e-7),
+            "clip_vf_s_objective",
+            f"{what} (checked by finite differences, c1 = {c1}, c2 = {c2}, ε = {epsilon})",
+        )

@@ -79,11 +79,26 @@ def test_categorical_kl_backward_matches_finite_differences(student, pair, rng):
     )
 
 
-@pytest.mark.parametrize("n", [1, 8])
-def test_kl_penalty_objective_value_and_gradients(student, rng, n):
+def test_categorical_kl_backward_at_extreme_logits(student):
+    logits_old = np.array([[1000.0, 999.0, 0.0], [0.0, 0.0, 0.0], [-1000.0, 0.0, 1000.0]])
+    logits = np.array([[998.0, 1000.0, -1000.0], [900.0, 899.0, 0.0], [0.0, 0.0, 0.0]])
+    grad_kl = np.array([1.0, -2.0, 0.5])
+    grad = student.categorical_kl_backward(logits_old, logits, grad_kl)
+    check_array(grad, "categorical_kl_backward", (3, 3), "∂L/∂z for logits near ±1000 (subtract each row's max)")
+    check_close(
+        grad,
+        (softmax(logits) - softmax(logits_old)) * grad_kl[:, None],
+        "categorical_kl_backward",
+        "∂L/∂z = (π − π_old) ∂L/∂KL for logits near ±1000 (softmax after subtracting each row's max)",
+        where=lambda i: f"row {i[0]}, z_old = {logits_old[i[0]].tolist()}, z = {logits[i[0]].tolist()}",
+    )
+
+
+@pytest.mark.parametrize("n, beta", [(1, 3.0), (8, 3.0), (8, 0.25)])
+def test_kl_penalty_objective_value_and_gradients(student, rng, n, beta):
     logp_old = rng.normal(-1.0, 0.5, n)
     logp = logp_old + rng.normal(0, 0.3, n)
-    advantages, kl, beta = rng.normal(size=n), rng.uniform(0, 0.05, n), 3.0
+    advantages, kl = rng.normal(size=n), rng.uniform(0, 0.05, n)
 
     def reference():
         return float(np.mean(np.exp(logp - logp_old) * advantages - beta * kl))
@@ -92,14 +107,19 @@ def test_kl_penalty_objective_value_and_gradients(student, rng, n):
         student.kl_penalty_objective, "kl_penalty_objective", logp, logp_old, advantages, kl, beta
     )
     check_close(
-        check_scalar(value, "kl_penalty_objective"), reference(), "kl_penalty_objective", "the value Ê[r Â − β KL]"
+        check_scalar(value, "kl_penalty_objective"),
+        reference(),
+        "kl_penalty_objective",
+        f"the value Ê[r Â − β KL] (β = {beta})",
     )
     check_array(grad_logp, "kl_penalty_objective", (n,), "∂L/∂ log π")
     check_array(grad_kl, "kl_penalty_objective", (n,), "∂L/∂KL")
     check_close(
         grad_logp, numerical_gradient(reference, logp), "kl_penalty_objective", "∂L/∂ log π (finite differences)"
     )
-    check_close(grad_kl, numerical_gradient(reference, kl), "kl_penalty_objective", "∂L/∂KL (it should be −β/n)")
+    check_close(
+        grad_kl, numerical_gradient(reference, kl), "kl_penalty_objective", f"∂L/∂KL (it should be −β/n, β = {beta})"
+    )
 
 
 @pytest.mark.parametrize(

@@ -31,8 +31,12 @@ def test_bradley_terry_loss_value(student, scores):
         "bradley_terry_loss: return (loss, grad_preferred, grad_rejected)"
     )
     loss = check_scalar(result[0], "bradley_terry_loss", "the loss")
-    check_close(loss, reference_bt(preferred, rejected), "bradley_terry_loss",
-                "the loss −Ê[log σ(r_w − r_l)] (the preferred score comes first)")
+    check_close(
+        loss,
+        reference_bt(preferred, rejected),
+        "bradley_terry_loss",
+        "the loss −Ê[log σ(r_w − r_l)] (the preferred score comes first)",
+    )
 
 
 def test_bradley_terry_gradient_matches_finite_differences(student, scores):
@@ -40,10 +44,22 @@ def test_bradley_terry_gradient_matches_finite_differences(student, scores):
     _, grad_w, grad_l = student.bradley_terry_loss(preferred, rejected)
     check_array(grad_w, "bradley_terry_loss", (8,), "grad_preferred")
     check_array(grad_l, "bradley_terry_loss", (8,), "grad_rejected")
-    check_close(grad_w, numerical_gradient(lambda: reference_bt(preferred, rejected), preferred), "bradley_terry_loss",
-                "∂L/∂r_w (checked by finite differences; it should be −σ(r_l − r_w)/n)", 1e-5, 1e-7)
-    check_close(grad_l, numerical_gradient(lambda: reference_bt(preferred, rejected), rejected), "bradley_terry_loss",
-                "∂L/∂r_l (checked by finite differences; the rejected score is a variable too)", 1e-5, 1e-7)
+    check_close(
+        grad_w,
+        numerical_gradient(lambda: reference_bt(preferred, rejected), preferred),
+        "bradley_terry_loss",
+        "∂L/∂r_w (checked by finite differences; it should be −σ(r_l − r_w)/n)",
+        1e-5,
+        1e-7,
+    )
+    check_close(
+        grad_l,
+        numerical_gradient(lambda: reference_bt(preferred, rejected), rejected),
+        "bradley_terry_loss",
+        "∂L/∂r_l (checked by finite differences; the rejected score is a variable too)",
+        1e-5,
+        1e-7,
+    )
 
 
 def test_bradley_terry_survives_huge_margins(student):
@@ -76,13 +92,18 @@ def sequences(rng):
 def test_kl_shaped_rewards_by_hand(student):
     logp = np.log(np.array([[0.5, 0.5, 0.5], [0.2, 0.2, 0.2]]))
     logp_ref = np.log(np.array([[0.25, 0.5, 0.9], [0.4, 0.4, 0.4]]))
-    rewards = call_checking_inputs(student.kl_shaped_rewards, "kl_shaped_rewards", logp, logp_ref,
-                                   np.array([3.0, -1.0]), np.array([2, 3]), 0.5)
+    rewards = call_checking_inputs(
+        student.kl_shaped_rewards, "kl_shaped_rewards", logp, logp_ref, np.array([3.0, -1.0]), np.array([2, 3]), 0.5
+    )
     check_array(rewards, "kl_shaped_rewards", (2, 3))
     half_log2 = 0.5 * np.log(2.0)
     expected = np.array([[-half_log2, 3.0, 0.0], [half_log2, half_log2, half_log2 - 1.0]])
-    check_close(rewards, expected, "kl_shaped_rewards",
-                "the rewards (−β log π/π_ref per token, R(x) added on the last token t = length − 1, 0 after)")
+    check_close(
+        rewards,
+        expected,
+        "kl_shaped_rewards",
+        "the rewards (−β log π/π_ref per token, R(x) added on the last token t = length − 1, 0 after)",
+    )
 
 
 def test_kl_shaped_rewards_sum_to_score_minus_beta_kl(student, sequences):
@@ -90,10 +111,15 @@ def test_kl_shaped_rewards_sum_to_score_minus_beta_kl(student, sequences):
     rewards = check_array(student.kl_shaped_rewards(logp, logp_ref, scores, lengths, 0.3), "kl_shaped_rewards", (3, 5))
     inside = np.arange(5)[None, :] < lengths[:, None]
     expected = scores - 0.3 * np.where(inside, logp - logp_ref, 0.0).sum(axis=1)
-    check_close(rewards.sum(axis=1), expected, "kl_shaped_rewards",
-                "the return of each sequence, R(x) − β Σ_t log π/π_ref")
-    check_close(np.where(inside, 0.0, rewards), np.zeros((3, 5)), "kl_shaped_rewards",
-                "the rewards after the end of a sequence (they should be 0)")
+    check_close(
+        rewards.sum(axis=1), expected, "kl_shaped_rewards", "the return of each sequence, R(x) − β Σ_t log π/π_ref"
+    )
+    check_close(
+        np.where(inside, 0.0, rewards),
+        np.zeros((3, 5)),
+        "kl_shaped_rewards",
+        "the rewards after the end of a sequence (they should be 0)",
+    )
 
 
 def test_kl_shaped_rewards_without_penalty_are_the_score_at_the_end(student, sequences):
@@ -108,5 +134,9 @@ def test_kl_shaped_rewards_penalise_every_token_where_it_is_chosen(student, sequ
     """Where the policy picks a token more likely than π_ref does, that token's reward falls by β log π/π_ref."""
     logp, logp_ref, scores, lengths = sequences
     rewards = student.kl_shaped_rewards(logp, logp_ref, np.zeros(3), lengths, 2.0)
-    check_close(rewards[0], -2.0 * (logp[0] - logp_ref[0]), "kl_shaped_rewards",
-                "the per-token rewards with R = 0 (each −β (log π − log π_ref), at its own token)")
+    check_close(
+        rewards[0],
+        -2.0 * (logp[0] - logp_ref[0]),
+        "kl_shaped_rewards",
+        "the per-token rewards with R = 0 (each −β (log π − log π_ref), at its own token)",
+    )

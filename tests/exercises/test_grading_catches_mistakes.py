@@ -1,5 +1,7 @@
 """The grading tests themselves, checked: no test passes against the untouched stubs, every deliberately wrong variant
-fails at least one test, every exercise function is graded, and exercises/ is what solutions/ generates.
+fails at least one test and its first failure names the mistake, every other correct way of writing an exercise
+(tests/exercises/right/) passes every test, every exercise function is graded, and exercises/ is what solutions/
+generates.
 
 Each check runs the grading tests in a child pytest process, the way ``minippo grade`` does.
 """
@@ -13,6 +15,7 @@ import re
 from collections import defaultdict
 
 import _harness
+import numpy as np
 import pytest
 from make_exercises import SOLUTIONS, exercise_names, expected_exercises
 
@@ -24,11 +27,15 @@ pytestmark = pytest.mark.skipif(
 WRONG = _harness.ROOT / "tests" / "exercises" / "wrong"
 
 
-def variants_of(chapter: str) -> dict:
+def wrong_module(chapter: str):
     spec = importlib.util.spec_from_file_location(f"_variants_{chapter}", WRONG / f"{chapter}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    return module.VARIANTS
+    return module
+
+
+def variants_of(chapter: str) -> dict:
+    return wrong_module(chapter).VARIANTS
 
 
 def exercises_by_chapter() -> dict[str, list[str]]:
@@ -122,3 +129,88 @@ def test_every_wrong_variant_fails_at_least_one_grading_test():
     assert set(outcomes) == expected, f"variants that did not run: {sorted(expected - set(outcomes))}"
     accepted = [variant for variant, rs in outcomes.items() if not any(r.outcome == "failed" for r in rs)]
     assert not accepted, f"wrong variants that pass every grading test: {accepted}"
+    # the first failure, the one the scoreboard shows, names the mistake where the variant says what it must say
+    unnamed = []
+    for (chapter, variant), rs in sorted(outcomes.items()):
+        pattern = getattr(wrong_module(chapter), "FIRST_FAILURE", {}).get(variant)
+        first = next(r for r in rs if r.outcome == "failed")
+        if pattern and not re.search(pattern, first.message):
+            unnamed.append(f"{chapter}:{variant}: {first.message!r} does not match {pattern!r}")
+    assert not unnamed, "first failures that do not name the mistake:\n" + "\n".join(unnamed)
+
+
+@pytest.mark.timeout(600)
+def test_no_right_variant_is_rejected():
+    files = [chapter_files()[n] for n in sorted(chapter_files())]
+    collected, results, note = run_tests("right", files, limit_s=500)
+    assert not note, note
+    ran = {
+        re.search(r"\[.*?right_([A-Za-z0-9_]+)", r.nodeid).group(1)
+        for r in results
+        if "right_" in r.nodeid and r.outcome != "skipped"  # a chapter without right variants skips its tests
+    }
+    expected = set()
+    for chapter in exercises_by_chapter():
+        path = _harness.ROOT / "tests" / "exercises" / "right" / f"{chapter}.py"
+        if not path.exists():  # a chapter may have no other way worth showing
+            continue
+        spec = importlib.util.spec_from_file_location(f"_right_{chapter}", path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        expected |= set(module.VARIANTS)
+    assert ran == expected, f"right variants that did not run: {sorted(expected - ran)}"
+    rejected = [f"{r.nodeid}: {r.message}" for r in results if r.outcome == "failed"]
+    assert not rejected, "correct variants rejected by a grading test:\n" + "\n".join(rejected[:10])
+
+
+# the harness's messages themselves
+
+
+def _message(check, *args, **kwargs) -> str:
+    with pytest.raises(AssertionError) as caught:
+        check(*args, **kwargs)
+    return str(caught.value)
+
+
+def test_check_close_shows_more_digits_and_what_differs_when_six_agree():
+    got = np.array([1.0, 2.0000002], dtype=np.float32)
+    text = _message(_harness.check_close, got, [1.0, 2.0000000001], "f", "the result", 1e-9, 1e-12)
+    assert "at index 1" in text and "got 2.00000024, expected 2 " in text, text
+    assert "more than the tolerance" in text and "the result is float32, not float64" in text, text
+
+
+def test_check_close_names_a_whole_result_off_by_one_factor():
+    expected = np.array([1.0, -2.0, 3.0, 0.5])
+    assert "the sign is flipped everywhere" in _message(_harness.check_close, -expected, expected, "f", "x")
+    assert "n times too large" in _message(_harness.check_close, 4 * expected, expected, "f", "x")
+    assert "twice the expected" in _message(_harness.check_close, 2 * expected, expected, "f", "x")
+
+
+def test_check_close_shows_the_inputs_at_the_failing_entry():
+    text = _message(_harness.check_close, [0.0, 1.0], [0.0, 2.0], "f", "x", where={"r_t": [0.9, 1.21], "ε": 0.2})
+    assert "at index 1 (where r_t = 1.21, ε = 0.2)" in text, text
+
+
+def test_a_raising_call_is_named_with_its_input_shapes_and_line():
+    module = type("module", (), {})()
+
+    def gae(rewards, terminated):
+        if terminated[0]:
+            return rewards
+        return rewards
+
+    module.gae = gae
+    student = _harness.Student(module, "test")
+    with pytest.raises(_harness.StudentError) as caught:
+        student.gae(np.zeros((3, 2)), np.zeros((3, 2), bool))
+    text = str(caught.value)
+    assert "gae(rewards=array (3, 2), terminated=array (3, 2) bool) raised ValueError" in text, text
+    assert "np.where" in text, text
+
+
+def test_check_array_and_check_scalar_want_float64():
+    assert "not float32" in _message(_harness.check_array, np.zeros(2, np.float32), "f", (2,))
+    assert "not int64" in _message(_harness.check_array, np.zeros(2, np.int64), "f", (2,))
+    assert "not float32" in _message(_harness.check_scalar, np.float32(1.0), "f")
+    assert "returned: None" in _message(_harness.check_array, None, "f", (2,))
+    assert _harness.check_scalar(np.float64(2.0), "f") == 2.0 and _harness.check_scalar(2.0, "f") == 2.0

@@ -222,5 +222,7 @@ def test_language_model(seed):
     same(ch12_language_model.bradley_terry_loss(preferred, rejected), bradley_terry_loss(preferred, rejected))
     logp, logp_ref = rng.normal(-1.5, 0.5, (4, 6)), rng.normal(-1.5, 0.5, (4, 6))
     scores, lengths = rng.normal(size=4), rng.integers(1, 7, 4)
-    same(ch12_language_model.kl_shaped_rewards(logp, logp_ref, scores, lengths, 0.4),
-         kl_shaped_rewards(logp, logp_ref, scores, lengths, 0.4))
+    same(
+        ch12_language_model.kl_shaped_rewards(logp, logp_ref, scores, lengths, 0.4),
+        kl_shaped_rewards(logp, logp_ref, scores, lengths, 0.4),
+    )

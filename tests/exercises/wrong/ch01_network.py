@@ -133,3 +133,47 @@ VARIANTS = {
     "adam_in_place": {"adam_step": adam_in_place},
     "adam_abs_instead_of_square": {"adam_step": adam_abs_instead_of_square},
 }
+
+
+def adam_step_count_from_zero(params, grads, m, v, t, lr=3e-4, beta1=0.9, beta2=0.999, eps=1e-8):
+    """Bias correction with t + 1, as if the first step were number 0."""
+    m = beta1 * m + (1 - beta1) * grads
+    v = beta2 * v + (1 - beta2) * grads**2
+    return params - lr * (m / (1 - beta1 ** (t + 1))) / (np.sqrt(v / (1 - beta2 ** (t + 1))) + eps), m, v
+
+
+def adam_default_lr(params, grads, m, v, t, lr=3e-4, beta1=0.9, beta2=0.999, eps=1e-8):
+    """Uses the default learning rate 3e-4 whatever lr is passed."""
+    m = beta1 * m + (1 - beta1) * grads
+    v = beta2 * v + (1 - beta2) * grads**2
+    return params - 3e-4 * (m / (1 - beta1**t)) / (np.sqrt(v / (1 - beta2**t)) + eps), m, v
+
+
+def linear_backward_float32(x, W, grad_y):
+    """Right gradients, returned in float32."""
+    return tuple(g.astype(np.float32) for g in correct_linear_backward(x, W, grad_y))
+
+
+def tanh_backward_returns_input(h, grad_h):
+    """Writes the result into grad_h and returns it: the caller's gradient changes."""
+    grad_h *= 1.0 - h * h
+    return grad_h
+
+
+VARIANTS.update(
+    {
+        "adam_step_count_from_zero": {"adam_step": adam_step_count_from_zero},
+        "adam_default_lr": {"adam_step": adam_default_lr},
+        "linear_backward_float32": {"linear_backward": linear_backward_float32},
+        "tanh_backward_returns_input": {"tanh_backward": tanh_backward_returns_input},
+    }
+)
+
+FIRST_FAILURE = {
+    "adam_step_count_from_zero": r"the step at t = 1",
+    "adam_no_bias_correction": r"the step at t = 1",
+    "adam_default_lr": r"lr",
+    "linear_backward_float32": r"float64.*not float32",
+    "tanh_backward_returns_input": r"tanh_backward (changed its input|returned one of its inputs)",
+    "adam_in_place": r"changed its input",
+}

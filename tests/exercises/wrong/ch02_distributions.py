@@ -212,3 +212,87 @@ VARIANTS = {
         "gaussian_entropy_backward": gaussian_entropy_backward_mean_over_batch
     },
 }
+
+
+def categorical_log_prob_backward_unshifted(logits, actions, grad_logp):
+    """Right formula, with a softmax that does not subtract the max: exp(1000) overflows to inf, inf/inf is NaN."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        grad = -softmax_unshifted(logits) * grad_logp[:, None]
+    grad[np.arange(len(actions)), actions] += grad_logp
+    return grad
+
+
+def categorical_entropy_backward_unshifted(logits, grad_entropy):
+    """Right formula, with an unshifted softmax."""
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        p = softmax_unshifted(logits)
+        log_p = np.log(p)
+        entropy = -(p * log_p).sum(axis=-1)
+        return -p * (log_p + entropy[:, None]) * grad_entropy[:, None]
+
+
+def gaussian_log_prob_float32(mean, log_std, actions):
+    """Right numbers, computed in float32."""
+    z = ((actions - mean) / np.exp(log_std)).astype(np.float32)
+    return -0.5 * (z * z).sum(axis=-1) - np.float32(log_std.sum() + 0.5 * mean.shape[-1] * LOG_2PI)
+
+
+def gaussian_log_prob_mean_over_dimensions(mean, log_std, actions):
+    """Averages the per-dimension terms over d instead of summing them (the log of a product is a sum)."""
+    z = (actions - mean) / np.exp(log_std)
+    return (-0.5 * z * z - log_std - 0.5 * LOG_2PI).mean(axis=-1)
+
+
+def log_softmax_wrong_axis(logits):
+    """Normalises over the batch (axis 0) instead of over the actions."""
+    shifted = logits - logits.max(axis=0, keepdims=True)
+    return shifted - np.log(np.exp(shifted).sum(axis=0, keepdims=True))
+
+
+VARIANTS.update(
+    {
+        "categorical_log_prob_backward_unshifted": {
+            "categorical_log_prob_backward": categorical_log_prob_backward_unshifted
+        },
+        "categorical_entropy_backward_unshifted": {
+            "categorical_entropy_backward": categorical_entropy_backward_unshifted
+        },
+        "gaussian_log_prob_float32": {"gaussian_log_prob": gaussian_log_prob_float32},
+        "gaussian_log_prob_mean_over_dimensions": {"gaussian_log_prob": gaussian_log_prob_mean_over_dimensions},
+        "log_softmax_wrong_axis": {"log_softmax": log_softmax_wrong_axis},
+    }
+)
+
+FIRST_FAILURE = {
+    "categorical_log_prob_backward_unshifted": r"categorical_log_prob_backward.*±1000",
+    "categorical_entropy_backward_unshifted": r"categorical_entropy_backward.*±1000",
+    "gaussian_log_prob_float32": r"float64.*not float32",
+    "log_softmax_unshifted": r"±1000",
+}
+
+
+def log_softmax_global_max(logits):
+    """Subtracts the largest logit of the whole batch, not of each row: a row far below it underflows."""
+    shifted = logits - logits.max()
+    with np.errstate(divide="ignore"):
+        return shifted - np.log(np.exp(shifted).sum(axis=-1, keepdims=True))
+
+
+def log_softmax_without_keepdims(logits):
+    """The row maximum without keepdims: (n, k) − (n,) does not broadcast (or does, wrongly, when n = k)."""
+    shifted = logits - logits.max(axis=-1)
+    return shifted - np.log(np.exp(shifted).sum(axis=-1))
+
+
+VARIANTS.update(
+    {
+        "log_softmax_global_max": {"log_softmax": log_softmax_global_max},
+        "log_softmax_without_keepdims": {"log_softmax": log_softmax_without_keepdims},
+    }
+)
+FIRST_FAILURE.update(
+    {
+        "log_softmax_global_max": r"±1000",
+        "log_softmax_without_keepdims": r"could not be broadcast",
+    }
+)

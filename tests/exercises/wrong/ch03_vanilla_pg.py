@@ -63,3 +63,45 @@ VARIANTS = {
     "normalize_single_sample_to_zero": {"normalize_advantages": normalize_single_sample_to_zero},
     "normalize_by_variance": {"normalize_advantages": normalize_by_variance},
 }
+
+
+def normalize_sample_std(advantages):
+    """Divides by the sample standard deviation (ddof = 1) where the contract says np.std."""
+    if len(advantages) < 2:
+        return advantages.copy()
+    return (advantages - advantages.mean()) / (advantages.std(ddof=1) + 1e-8)
+
+
+def normalize_single_returns_input(advantages):
+    """Returns the caller's own array for a batch of one, not a copy."""
+    if len(advantages) < 2:
+        return advantages
+    return (advantages - advantages.mean()) / (advantages.std() + 1e-8)
+
+
+def pg_objective_value_as_array(logp, advantages):
+    """The value as a one-element array instead of a float."""
+    return np.array([np.mean(logp * advantages)]), advantages / len(logp)
+
+
+def pg_objective_integer_length(logp, advantages):
+    """Right numbers, but the gradient in float32 (advantages cast down to save memory)."""
+    return float(np.mean(logp * advantages)), (advantages / len(logp)).astype(np.float32)
+
+
+VARIANTS.update(
+    {
+        "normalize_sample_std": {"normalize_advantages": normalize_sample_std},
+        "normalize_single_returns_input": {"normalize_advantages": normalize_single_returns_input},
+        "pg_objective_value_as_array": {"pg_objective": pg_objective_value_as_array},
+        "pg_objective_float32_gradient": {"pg_objective": pg_objective_integer_length},
+    }
+)
+
+FIRST_FAILURE = {
+    "normalize_sample_std": r"ddof = 0",
+    "normalize_single_returns_input": r"returned one of its inputs",
+    "pg_objective_value_as_array": r"single number",
+    "pg_objective_float32_gradient": r"float64.*not float32",
+    "normalize_in_place": r"changed its input",
+}

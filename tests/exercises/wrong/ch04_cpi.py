@@ -44,3 +44,22 @@ VARIANTS = {
     "cpi_gradient_without_advantage": {"cpi_objective": cpi_gradient_without_advantage},
     "cpi_value_of_log_ratio": {"cpi_objective": cpi_value_of_log_ratio},
 }
+
+
+def cpi_summed(logp, logp_old, advantages):
+    """Ê as a sum over the batch: value and gradient n times too large."""
+    ratio = np.exp(logp - logp_old)
+    return float(np.sum(ratio * advantages)), ratio * advantages
+
+
+def ratio_float32(logp, logp_old):
+    """Right ratios, returned in float32."""
+    return np.exp(logp - logp_old).astype(np.float32)
+
+
+VARIANTS.update({"cpi_summed": {"cpi_objective": cpi_summed}, "ratio_float32": {"importance_ratio": ratio_float32}})
+
+FIRST_FAILURE = {
+    "ratio_float32": r"float64.*not float32",
+    "ratio_of_exponentials": r"−800|underflow",
+}

@@ -58,3 +58,91 @@ VARIANTS = {
     "clip_fraction_counts_inside": {"clip_fraction": clip_fraction_counts_inside},
     "clip_fraction_a_count": {"clip_fraction": clip_fraction_a_count},
 }
+
+
+def clipped_band_on_log_ratio(logp, logp_old, advantages, epsilon):
+    """The value clipped right, but the gradient's band tested on |log r| < ε instead of |r − 1| < ε."""
+    ratio = np.exp(logp - logp_old)
+    inside = np.abs(logp - logp_old) < epsilon
+    value = float(np.mean(np.clip(ratio, 1 - epsilon, 1 + epsilon) * advantages))
+    return value, np.where(inside, ratio * advantages, 0.0) / len(logp)
+
+
+def clipped_epsilon_fixed(logp, logp_old, advantages, epsilon):
+    """ε = 0.2 written into the code, whatever epsilon is passed."""
+    ratio = np.exp(logp - logp_old)
+    inside = (ratio > 0.8) & (ratio < 1.2)
+    return float(np.mean(np.clip(ratio, 0.8, 1.2) * advantages)), np.where(inside, ratio * advantages, 0.0) / len(logp)
+
+
+def clipped_gradient_of_the_clipped_ratio(logp, logp_old, advantages, epsilon):
+    """The gradient clip(r) Â / n everywhere: the clipped ratio's value where its derivative belongs."""
+    ratio = np.exp(logp - logp_old)
+    clipped = np.clip(ratio, 1 - epsilon, 1 + epsilon)
+    return float(np.mean(clipped * advantages)), clipped * advantages / len(logp)
+
+
+def clipped_float32(logp, logp_old, advantages, epsilon):
+    """Right numbers, computed and returned in float32."""
+    ratio = np.exp(logp - logp_old).astype(np.float32)
+    inside = (ratio > 1 - epsilon) & (ratio < 1 + epsilon)
+    value = float(np.mean(np.clip(ratio, 1 - epsilon, 1 + epsilon) * advantages))
+    return value, np.where(inside, ratio * advantages.astype(np.float32), np.float32(0)) / np.float32(len(logp))
+
+
+def clipped_summed(logp, logp_old, advantages, epsilon):
+    """The sum over the batch instead of the mean (value and gradient)."""
+    ratio = np.exp(logp - logp_old)
+    inside = (ratio > 1 - epsilon) & (ratio < 1 + epsilon)
+    return float(np.sum(np.clip(ratio, 1 - epsilon, 1 + epsilon) * advantages)), np.where(
+        inside, ratio * advantages, 0.0
+    )
+
+
+def clip_fraction_on_log_ratio(logp, logp_old, epsilon):
+    """Counts |log r| > ε, a band that differs from |r − 1| > ε between 1 + ε and e^ε and between e^−ε and 1 − ε."""
+    return float(np.mean(np.abs(logp - logp_old) > epsilon))
+
+
+def clip_fraction_python_or(logp, logp_old, epsilon):
+    """A Python `or` between two arrays: fine for one sample, an error for a batch."""
+    ratio = np.exp(logp - logp_old)
+    return float(np.mean((ratio < 1 - epsilon) or (ratio > 1 + epsilon)))
+
+
+def clip_fraction_epsilon_fixed(logp, logp_old, epsilon):
+    """ε = 0.2 written into the code."""
+    return float(np.mean(np.abs(np.exp(logp - logp_old) - 1) > 0.2))
+
+
+VARIANTS.update(
+    {
+        "clipped_band_on_log_ratio": {"clipped_surrogate": clipped_band_on_log_ratio},
+        "clipped_epsilon_fixed": {"clipped_surrogate": clipped_epsilon_fixed},
+        "clipped_gradient_of_the_clipped_ratio": {"clipped_surrogate": clipped_gradient_of_the_clipped_ratio},
+        "clipped_float32": {"clipped_surrogate": clipped_float32},
+        "clipped_summed": {"clipped_surrogate": clipped_summed},
+        "clip_fraction_on_log_ratio": {"clip_fraction": clip_fraction_on_log_ratio},
+        "clip_fraction_python_or": {"clip_fraction": clip_fraction_python_or},
+        "clip_fraction_epsilon_fixed": {"clip_fraction": clip_fraction_epsilon_fixed},
+    }
+)
+
+# what the first failing test's message must say (a regular expression), so that the scoreboard names the mistake
+FIRST_FAILURE = {
+    "clipped_gradient_not_zeroed": r"gradient for one sample with r = 1\.5.*should be 0",
+    "clipped_gradient_without_ratio": r"gradient for one sample .* should be 0\.9 \(r Â",
+    "clipped_band_around_zero": r"one sample",
+    "clipped_log_ratio": r"one sample",
+    "clip_fraction_one_side": r"r = 0\.5 .*should be 1",
+    "clip_fraction_counts_inside": r"r = 1\.5 .*should be 1, not 0",
+    "clip_fraction_a_count": r"fraction .* got 4, expected 1",
+    "clipped_band_on_log_ratio": r"r = 1\.21.*not on log r",
+    "clipped_epsilon_fixed": r"r = 1\.15, Â = 1\.0, ε = 0\.1.*ε fixed at 0\.2",
+    "clipped_gradient_of_the_clipped_ratio": r"r = 1\.5.*should be 0",
+    "clipped_float32": r"float64 .*not float32",
+    "clipped_summed": r"n times too large everywhere: a sum where the mean belongs",
+    "clip_fraction_on_log_ratio": r"r = 1\.21 .*not on log r",
+    "clip_fraction_python_or": r"clip_fraction\(logp=array \(\d+,\).*truth value.*np\.where",
+    "clip_fraction_epsilon_fixed": r"r = 1\.15 and ε = 0\.1",
+}

@@ -62,3 +62,60 @@ VARIANTS = {
     "gradient_never_zero": {"clip_objective": gradient_never_zero},
     "ratio_from_exponentials": {"clip_objective": ratio_from_exponentials},
 }
+
+
+def case_by_case_on_log_ratio(logp, logp_old, advantages, epsilon):
+    """Case by case, with the clip's cases tested on log r against ±ε instead of r against 1 ± ε."""
+    log_ratio = logp - logp_old
+    ratio = np.exp(log_ratio)
+    clipped = ((log_ratio > epsilon) & (advantages > 0)) | ((log_ratio < -epsilon) & (advantages < 0))
+    bound = np.where(advantages > 0, 1 + epsilon, 1 - epsilon)
+    value = np.where(clipped, bound * advantages, ratio * advantages)
+    return float(np.mean(value)), np.where(clipped, 0.0, ratio * advantages) / len(logp)
+
+
+def gradient_mask_strict(logp, logp_old, advantages, epsilon):
+    """The gradient passes where the unclipped term is strictly smaller: inside the band the two are equal, so the
+    gradient is lost there."""
+    ratio = np.exp(logp - logp_old)
+    unclipped = ratio * advantages
+    clipped = np.clip(ratio, 1 - epsilon, 1 + epsilon) * advantages
+    return float(np.mean(np.minimum(unclipped, clipped))), np.where(unclipped < clipped, unclipped, 0.0) / len(logp)
+
+
+def epsilon_fixed(logp, logp_old, advantages, epsilon):
+    """ε = 0.2 written into the code."""
+    ratio = np.exp(logp - logp_old)
+    unclipped = ratio * advantages
+    clipped = np.clip(ratio, 0.8, 1.2) * advantages
+    return float(np.mean(np.minimum(unclipped, clipped))), np.where(unclipped <= clipped, unclipped, 0.0) / len(logp)
+
+
+def gradient_of_the_min_value(logp, logp_old, advantages, epsilon):
+    """min(r Â, clip(r) Â) / n as the gradient: the value of the chosen term where its derivative belongs."""
+    ratio = np.exp(logp - logp_old)
+    smaller = np.minimum(ratio * advantages, np.clip(ratio, 1 - epsilon, 1 + epsilon) * advantages)
+    return float(np.mean(smaller)), smaller / len(logp)
+
+
+VARIANTS.update(
+    {
+        "case_by_case_on_log_ratio": {"clip_objective": case_by_case_on_log_ratio},
+        "gradient_mask_strict": {"clip_objective": gradient_mask_strict},
+        "epsilon_fixed": {"clip_objective": epsilon_fixed},
+        "gradient_of_the_min_value": {"clip_objective": gradient_of_the_min_value},
+    }
+)
+
+FIRST_FAILURE = {
+    "without_the_min": r"r = 1\.5, Â = -1\.0.*the clipped term alone",
+    "max_instead_of_min": r"the optimistic bound; L\^CLIP takes the min",
+    "min_of_the_ratios": r"the min taken over the ratios",
+    "gradient_zero_outside_the_band": r"r = 1\.5, Â = -1\.0.*should be -1\.5",
+    "gradient_never_zero": r"r = 1\.5, Â = 1\.0.*should be 0",
+    "case_by_case_on_log_ratio": r"r = 1\.21.*not on log r",
+    "gradient_mask_strict": r"r = 1\.1, Â = 2\.0.*should be 2\.2.*inside the band.*, not 0",
+    "epsilon_fixed": r"ε = 0\.1.*ε fixed at 0\.2",
+    "gradient_of_the_min_value": r"r = 1\.5, Â = 1\.0.*should be 0",
+    "ratio_from_exponentials": r"near −900.*exp\(log π − log π_old\)",
+}

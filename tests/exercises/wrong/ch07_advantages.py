@@ -127,3 +127,128 @@ VARIANTS = {
     "gae_resets_after_the_end": {"gae": gae_resets_after_the_end},
     "gae_loop_never_ends": {"gae": gae_loop_never_ends},
 }
+
+
+def returns_python_if(rewards, next_values, terminated, truncated, gamma):
+    """Right for one environment, but branches with a Python `if` on terminated[t], an array for (T, N) batches."""
+    returns = np.zeros(np.shape(rewards))
+    for t in range(len(rewards) - 1, -1, -1):
+        if terminated[t]:
+            returns[t] = rewards[t]
+        elif truncated[t] or t == len(rewards) - 1:
+            returns[t] = rewards[t] + gamma * next_values[t]
+        else:
+            returns[t] = rewards[t] + gamma * returns[t + 1]
+    return returns
+
+
+def returns_zeros_like(rewards, next_values, terminated, truncated, gamma):
+    """Right numbers in an array made by np.zeros_like(rewards): float32 rewards give float32 returns."""
+    returns = np.zeros_like(rewards)
+    for t in range(len(rewards) - 1, -1, -1):
+        following = next_values[t] if t == len(rewards) - 1 else np.where(truncated[t], next_values[t], returns[t + 1])
+        returns[t] = rewards[t] + gamma * np.where(terminated[t], 0.0, following)
+    return returns
+
+
+def returns_bootstrap_last_step_always(rewards, next_values, terminated, truncated, gamma):
+    """The batch's last step is always bootstrapped, even when it terminated."""
+    returns = np.zeros(np.shape(rewards))
+    for t in range(len(rewards) - 1, -1, -1):
+        if t == len(rewards) - 1:
+            returns[t] = rewards[t] + gamma * next_values[t]
+        else:
+            following = np.where(truncated[t], next_values[t], returns[t + 1])
+            returns[t] = rewards[t] + gamma * np.where(terminated[t], 0.0, following)
+    return returns
+
+
+def returns_truncation_wins(rewards, next_values, terminated, truncated, gamma):
+    """Looks at truncated before terminated: a step with both flags bootstraps from a state that was terminal."""
+    returns = np.zeros(np.shape(rewards))
+    for t in range(len(rewards) - 1, -1, -1):
+        tail = returns[t + 1] if t < len(rewards) - 1 else next_values[t]
+        tail = np.where(terminated[t], 0.0, tail)
+        returns[t] = rewards[t] + gamma * np.where(truncated[t], next_values[t], tail)
+    return returns
+
+
+def td_python_if(rewards, values, next_values, terminated, gamma):
+    """A loop with a Python `if terminated[t]`: an error for (T, N) batches."""
+    deltas = np.zeros(np.shape(rewards))
+    for t in range(len(rewards)):
+        following = 0.0 if terminated[t] else next_values[t]
+        deltas[t] = rewards[t] + gamma * following - values[t]
+    return deltas
+
+
+def td_float32(rewards, values, next_values, terminated, gamma):
+    """Right numbers, but the inputs' float32 is kept."""
+    return rewards + gamma * np.where(terminated, 0, next_values) - values
+
+
+def gae_any_environment_ends(rewards, values, next_values, terminated, truncated, gamma, lam):
+    """Cuts every environment's sum when any one of them ends an episode (np.any over the row)."""
+    deltas = correct_td_residuals(rewards, values, next_values, terminated, gamma)
+    ended = np.asarray(terminated) | np.asarray(truncated)
+    advantages, following = np.zeros_like(deltas), np.zeros_like(deltas[0])
+    for t in range(len(deltas) - 1, -1, -1):
+        following = deltas[t] + gamma * lam * (0.0 if np.any(ended[t]) else following)
+        advantages[t] = following
+    return advantages
+
+
+def gae_decays_by_lambda_only(rewards, values, next_values, terminated, truncated, gamma, lam):
+    """Decays by λ instead of γλ."""
+    deltas = correct_td_residuals(rewards, values, next_values, terminated, gamma)
+    ended = np.asarray(terminated) | np.asarray(truncated)
+    advantages, following = np.zeros_like(deltas), np.zeros_like(deltas[0])
+    for t in range(len(deltas) - 1, -1, -1):
+        following = deltas[t] + lam * np.where(ended[t], 0.0, following)
+        advantages[t] = following
+    return advantages
+
+
+def gae_python_if(rewards, values, next_values, terminated, truncated, gamma, lam):
+    """A Python `if terminated[t] or truncated[t]`: right for one environment, an error for (T, N)."""
+    deltas = correct_td_residuals(rewards, values, next_values, terminated, gamma)
+    advantages = np.zeros(np.shape(deltas))
+    for t in range(len(deltas) - 1, -1, -1):
+        if t == len(deltas) - 1 or terminated[t] or truncated[t]:
+            advantages[t] = deltas[t]
+        else:
+            advantages[t] = deltas[t] + gamma * lam * advantages[t + 1]
+    return advantages
+
+
+VARIANTS.update(
+    {
+        "returns_python_if": {"discounted_returns": returns_python_if},
+        "returns_zeros_like": {"discounted_returns": returns_zeros_like},
+        "returns_bootstrap_last_step_always": {"discounted_returns": returns_bootstrap_last_step_always},
+        "returns_truncation_wins": {"discounted_returns": returns_truncation_wins},
+        "td_python_if": {"td_residuals": td_python_if},
+        "td_float32": {"td_residuals": td_float32},
+        "gae_any_environment_ends": {"gae": gae_any_environment_ends},
+        "gae_decays_by_lambda_only": {"gae": gae_decays_by_lambda_only},
+        "gae_python_if": {"gae": gae_python_if},
+    }
+)
+
+FIRST_FAILURE = {
+    "returns_ignore_episode_ends": r"G for one step that terminated",
+    "returns_truncation_as_termination": r"truncat",
+    "returns_no_bootstrap_at_batch_end": r"one step cut by the horizon",
+    "td_ignores_termination": r"td_residuals: .*termination",
+    "td_sign_flipped": r"td_residuals",
+    "returns_python_if": r"discounted_returns\(rewards=array \(24, 3\).*truth value.*np\.where",
+    "returns_zeros_like": r"float64.*not float32",
+    "returns_bootstrap_last_step_always": r"G for one step that terminated .*no bootstrap",
+    "returns_truncation_wins": r"both terminated and truncated",
+    "td_python_if": r"td_residuals\(rewards=array \(24, 3\).*truth value",
+    "td_float32": r"td_residuals.*float64.*not float32",
+    "gae_any_environment_ends": r"environment",
+    "gae_decays_by_lambda_only": r"gae",
+    "gae_python_if": r"gae\(rewards=array \(24, 3\).*truth value",
+    "gae_loop_never_ends": r"took longer than",
+}

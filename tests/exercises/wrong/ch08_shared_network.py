@@ -100,3 +100,47 @@ VARIANTS = {
     "objective_value_gradient_without_c1": {"clip_vf_s_objective": objective_value_gradient_without_c1},
     "objective_entropy_gradient_not_averaged": {"clip_vf_s_objective": objective_entropy_gradient_not_averaged},
 }
+
+
+def clipped_value_loss_epsilon_fixed(values, value_targets, values_old, epsilon):
+    """ε = 0.2 written into the code."""
+    error = values - value_targets
+    clipped_error = values_old + np.clip(values - values_old, -0.2, 0.2) - value_targets
+    use_clipped = clipped_error**2 > error**2
+    inside = np.abs(values - values_old) <= 0.2
+    grad = np.where(use_clipped, np.where(inside, clipped_error, 0.0), error) / len(values)
+    return 0.5 * float(np.mean(np.maximum(error**2, clipped_error**2))), grad
+
+
+def clipped_value_loss_around_the_target(values, value_targets, values_old, epsilon):
+    """Clips V around V^targ instead of around V_old."""
+    error = values - value_targets
+    clipped_error = np.clip(values - value_targets, -epsilon, epsilon)
+    use_clipped = clipped_error**2 > error**2
+    grad = np.where(use_clipped, 0.0, error) / len(values)
+    return 0.5 * float(np.mean(np.maximum(error**2, clipped_error**2))), grad
+
+
+def objective_epsilon_fixed(logp, logp_old, advantages, values, value_targets, entropy, epsilon, c1, c2):
+    """ε = 0.2 written into the call to L^CLIP."""
+    clip_value, grad_logp, vf, vf_grad = _parts(logp, logp_old, advantages, values, value_targets, 0.2)
+    n = len(logp)
+    return clip_value - c1 * vf + c2 * float(np.mean(entropy)), grad_logp, -c1 * vf_grad, np.full(n, c2 / n)
+
+
+VARIANTS.update(
+    {
+        "clipped_value_loss_epsilon_fixed": {"clipped_value_loss": clipped_value_loss_epsilon_fixed},
+        "clipped_value_loss_around_the_target": {"clipped_value_loss": clipped_value_loss_around_the_target},
+        "objective_epsilon_fixed": {"clip_vf_s_objective": objective_epsilon_fixed},
+    }
+)
+
+FIRST_FAILURE = {
+    "clipped_value_loss_min": r"the clipped loss is pessimistic, it takes the max",
+    "clipped_value_loss_gradient_through_clip": r"V\^clip is a constant",
+    "clipped_value_loss_epsilon_fixed": r"ε = 0\.4.*ε fixed at 0\.2",
+    "objective_epsilon_fixed": r"ε = 0\.35.*ε fixed at 0\.2",
+    "objective_adds_the_value_loss": r"value loss enters with −c1|the value loss added",
+    "objective_subtracts_the_entropy": r"the bonus enters with \+c2|entropy bonus subtracted",
+}

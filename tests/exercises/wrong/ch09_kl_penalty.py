@@ -118,3 +118,31 @@ VARIANTS = {
     "beta_rule_inclusive": {"adaptive_beta": beta_rule_inclusive},
     "beta_rule_resets": {"adaptive_beta": beta_rule_resets},
 }
+
+
+def kl_backward_unshifted(logits_old, logits, grad_kl):
+    """π − π_old with softmaxes that do not subtract the max: NaN for logits near ±1000."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        p = np.exp(logits_old) / np.exp(logits_old).sum(axis=-1, keepdims=True)
+        q = np.exp(logits) / np.exp(logits).sum(axis=-1, keepdims=True)
+    return (q - p) * grad_kl[:, None]
+
+
+def penalty_beta_fixed(logp, logp_old, advantages, kl, beta):
+    """β = 3 written into the gradient, whatever beta is passed."""
+    n, ratio = len(logp), np.exp(logp - logp_old)
+    return float(np.mean(ratio * advantages - beta * kl)), ratio * advantages / n, np.full(n, -3.0 / n)
+
+
+VARIANTS.update(
+    {
+        "kl_backward_unshifted": {"categorical_kl_backward": kl_backward_unshifted},
+        "penalty_beta_fixed": {"kl_penalty_objective": penalty_beta_fixed},
+    }
+)
+
+FIRST_FAILURE = {
+    "kl_backward_unshifted": r"categorical_kl_backward.*±1000",
+    "penalty_beta_fixed": r"β = 0\.25",
+    "beta_rule_inclusive": r"exactly",
+}

@@ -1,5 +1,7 @@
 """Plausible mistakes in chapter 10: the assembled loss and the epoch and minibatch loop."""
 
+import dataclasses
+
 import numpy as np
 
 from minippo import losses
@@ -140,3 +142,205 @@ VARIANTS = {
     "update_same_minibatch_every_step": {"ppo_update": update_same_minibatch_every_step},
     "update_ascends_the_loss": {"ppo_update": update_ascends_the_loss},
 }
+
+
+def _with(config, **changes):
+    return dataclasses.replace(config, **changes)
+
+
+def loss_epsilon_fixed(agent, minibatch, config):
+    """ε = 0.2 written into the code instead of config.clip_epsilon."""
+    return _assemble(agent, minibatch, _with(config, clip_epsilon=0.2))
+
+
+def loss_band_on_log_ratio(agent, minibatch, config):
+    """L^CLIP written case by case, with the clip's cases tested on log r against ±ε instead of r against 1 ± ε."""
+    out, values, cache = agent.forward(minibatch["obs"])
+    dist = agent.distribution(out)
+    logp = dist.log_prob(minibatch["actions"])
+    n, eps = len(logp), config.clip_epsilon
+    advantages = minibatch["advantages"]
+    if config.normalize_advantages and n > 1:
+        advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
+    log_ratio = logp - minibatch["logp"]
+    ratio = np.exp(log_ratio)
+    clipped = ((log_ratio > eps) & (advantages > 0)) | ((log_ratio < -eps) & (advantages < 0))
+    objective = np.where(clipped, np.where(advantages > 0, 1 + eps, 1 - eps) * advantages, ratio * advantages)
+    grad_logp = np.where(clipped, 0.0, ratio * advantages) / n
+    value_loss, grad_values = losses.value_loss(values, minibatch["returns"])
+    loss = -float(np.mean(objective)) + config.value_coef * value_loss
+    grads = list(dist.log_prob_backward(minibatch["actions"], -grad_logp))
+    if config.entropy_coef:
+        loss -= config.entropy_coef * float(np.mean(dist.entropy()))
+        grads = [g + e for g, e in zip(grads, dist.entropy_backward(np.full(n, -config.entropy_coef / n)))]
+    agent.backward(cache, grads[0], config.value_coef * grad_values, grads[1] if len(grads) > 1 else None)
+    return float(loss)
+
+
+def loss_sample_std(agent, minibatch, config):
+    """Normalises the advantages with the sample standard deviation (ddof = 1) where the contract says np.std."""
+    n = len(minibatch["advantages"])
+    if config.normalize_advantages and n > 1:
+        a = minibatch["advantages"]
+        minibatch = dict(minibatch, advantages=(a - a.mean()) / (a.std(ddof=1) + 1e-8))
+    return _assemble(agent, minibatch, config, normalize=False)
+
+
+def loss_value_coef_fixed(agent, minibatch, config):
+    """c1 = 0.5 written into the code instead of config.value_coef."""
+    return _assemble(agent, minibatch, _with(config, value_coef=0.5))
+
+
+def loss_entropy_coef_fixed(agent, minibatch, config):
+    """c2 = 0.0 (the paper's MuJoCo setting) written into the code instead of config.entropy_coef."""
+    return _assemble(agent, minibatch, _with(config, entropy_coef=0.0))
+
+
+def update_normalises_the_whole_batch(agent, optimizer, data, config, rng):
+    """Normalises the advantages once over the whole batch, then turns the per-minibatch normalisation off."""
+    a = data["advantages"]
+    data = dict(data, advantages=(a - a.mean()) / (a.std() + 1e-8))
+    return _loop(agent, optimizer, data, _with(config, normalize_advantages=False), rng)
+
+
+def update_shuffles_once(agent, optimizer, data, config, rng):
+    """One permutation for all the epochs."""
+    n, steps = len(data["logp"]), 0
+    order = rng.permutation(n) if config.shuffle_minibatches else np.arange(n)
+    for _ in range(config.epochs):
+        for start in range(0, n, config.minibatch_size):
+            index = order[start : start + config.minibatch_size]
+            loss_and_grad(agent, {key: value[index] for key, value in data.items()}, config)
+            if config.grad_norm_clipping:
+                clip_grad_norm(agent.grads, config.max_grad_norm)
+            optimizer.step(agent.grads)
+            steps += 1
+    return steps
+
+
+class _GlobalRandom:
+    def permutation(self, n):
+        return np.random.permutation(n)
+
+
+def update_global_random(agent, optimizer, data, config, rng):
+    """Shuffles with np.random.permutation, ignoring the rng passed in."""
+    return _loop(agent, optimizer, data, config, _GlobalRandom())
+
+
+def update_fresh_generator(agent, optimizer, data, config, rng):
+    """Makes a new Generator from config.seed at every call, so every update shuffles the same way."""
+    return _loop(agent, optimizer, data, config, np.random.default_rng(config.seed))
+
+
+def update_always_shuffles(agent, optimizer, data, config, rng):
+    """Ignores shuffle_minibatches: shuffles even when it is False."""
+    return _loop(agent, optimizer, data, _with(config, shuffle_minibatches=True), rng)
+
+
+def update_returns_nothing(agent, optimizer, data, config, rng):
+    """Right updates, but no return value."""
+    _loop(agent, optimizer, data, config, rng)
+
+
+def update_clips_after_the_step(agent, optimizer, data, config, rng):
+    """Clips the gradient after optimizer.step has used it."""
+    n, steps = len(data["logp"]), 0
+    for _ in range(config.epochs):
+        order = rng.permutation(n) if config.shuffle_minibatches else np.arange(n)
+        for start in range(0, n, config.minibatch_size):
+            index = order[start : start + config.minibatch_size]
+            loss_and_grad(agent, {key: value[index] for key, value in data.items()}, config)
+            optimizer.step(agent.grads)
+            if config.grad_norm_clipping:
+                clip_grad_norm(agent.grads, config.max_grad_norm)
+            steps += 1
+    return steps
+
+
+def update_normalises_data_in_place(agent, optimizer, data, config, rng):
+    """Normalises data["advantages"] in place over the whole batch (the caller's array changes)."""
+    a = data["advantages"]
+    a -= a.mean()
+    a /= a.std() + 1e-8
+    return _loop(agent, optimizer, data, config, rng)
+
+
+VARIANTS.update(
+    {
+        "loss_epsilon_fixed": {"loss_and_grad": loss_epsilon_fixed},
+        "loss_band_on_log_ratio": {"loss_and_grad": loss_band_on_log_ratio},
+        "loss_sample_std": {"loss_and_grad": loss_sample_std},
+        "loss_value_coef_fixed": {"loss_and_grad": loss_value_coef_fixed},
+        "loss_entropy_coef_fixed": {"loss_and_grad": loss_entropy_coef_fixed},
+        "update_normalises_the_whole_batch": {"ppo_update": update_normalises_the_whole_batch},
+        "update_shuffles_once": {"ppo_update": update_shuffles_once},
+        "update_global_random": {"ppo_update": update_global_random},
+        "update_fresh_generator": {"ppo_update": update_fresh_generator},
+        "update_always_shuffles": {"ppo_update": update_always_shuffles},
+        "update_returns_nothing": {"ppo_update": update_returns_nothing},
+        "update_clips_after_the_step": {"ppo_update": update_clips_after_the_step},
+        "update_normalises_data_in_place": {"ppo_update": update_normalises_data_in_place},
+    }
+)
+
+FIRST_FAILURE = {
+    "loss_is_the_objective": r"the objective L\^\{CLIP\+VF\+S\} itself",
+    "loss_normalises_a_single_sample": r"a minibatch of one sample is normalised",
+    "loss_adds_the_value_term_with_a_minus": r"value loss enters with the wrong sign",
+    "loss_forgets_the_entropy": r"entropy bonus c2 S is missing",
+    "gradient_of_the_objective": r"sign is flipped everywhere",
+    "loss_epsilon_fixed": r"config\.clip_epsilon = 0\.1 is ignored",
+    "loss_value_coef_fixed": r"config\.value_coef = .* is ignored",
+    "loss_entropy_coef_fixed": r"entropy bonus c2 S is missing|config\.entropy_coef = .* is ignored",
+    "loss_band_on_log_ratio": r"not on log r",
+    "loss_sample_std": r"sample standard deviation",
+    "update_normalises_the_whole_batch": r"minibatch 1 .*not the whole batch",
+    "update_shuffles_once": r"every epoch used the same order",
+    "update_global_random": r"not as rng\.permutation\(n\) of the rng passed in",
+    "update_fresh_generator": r"not as rng\.permutation\(n\) of the rng passed in",
+    "update_always_shuffles": r"shuffle_minibatches = False",
+    "update_never_shuffles": r"rng\.permutation\(n\), not 0 … n−1",
+    "update_returns_nothing": r"number of optimizer steps.*not None",
+    "update_clips_after_the_step": r"max_grad_norm",
+    "update_normalises_data_in_place": r"changed its input",
+}
+
+
+def loss_normalises_without_epsilon(agent, minibatch, config):
+    """(Â − mean Â) / std Â without the 1e-8: equal advantages give 0/0."""
+    n = len(minibatch["advantages"])
+    if config.normalize_advantages and n > 1:
+        a = minibatch["advantages"]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            minibatch = dict(minibatch, advantages=(a - a.mean()) / a.std())
+    return _assemble(agent, minibatch, config, normalize=False)
+
+
+def update_counts_the_keys(agent, optimizer, data, config, rng):
+    """n = len(data), the number of keys in the dict, instead of the number of rows."""
+    n, steps = len(data), 0
+    for _ in range(config.epochs):
+        order = rng.permutation(n) if config.shuffle_minibatches else np.arange(n)
+        for start in range(0, n, config.minibatch_size):
+            index = order[start : start + config.minibatch_size]
+            loss_and_grad(agent, {key: value[index] for key, value in data.items()}, config)
+            if config.grad_norm_clipping:
+                clip_grad_norm(agent.grads, config.max_grad_norm)
+            optimizer.step(agent.grads)
+            steps += 1
+    return steps
+
+
+VARIANTS.update(
+    {
+        "loss_normalises_without_epsilon": {"loss_and_grad": loss_normalises_without_epsilon},
+        "update_counts_the_keys": {"ppo_update": update_counts_the_keys},
+    }
+)
+FIRST_FAILURE.update(
+    {
+        "loss_normalises_without_epsilon": r"all equal \(std Â = 0\)|NaN",
+        "update_counts_the_keys": r"optimizer steps|rows",
+    }
+)

@@ -1,0 +1,33 @@
+"""Other correct ways to write chapter 6."""
+
+import numpy as np
+
+
+def clip_objective_case_by_case(logp, logp_old, advantages, epsilon):
+    """L^CLIP case by case: the clipped term is the min exactly past the band in the direction that helps."""
+    ratio = np.exp(logp - logp_old)
+    helped_high = (advantages > 0) & (ratio > 1.0 + epsilon)
+    helped_low = (advantages < 0) & (ratio < 1.0 - epsilon)
+    per_sample = np.where(helped_high, (1.0 + epsilon) * advantages, ratio * advantages)
+    per_sample = np.where(helped_low, (1.0 - epsilon) * advantages, per_sample)
+    flat = helped_high | helped_low
+    return float(np.mean(per_sample)), np.where(flat, 0.0, ratio * advantages) / len(ratio)
+
+
+def clip_objective_loop(logp, logp_old, advantages, epsilon):
+    """One sample at a time, with Python's min."""
+    n = len(logp)
+    total, grad = 0.0, np.zeros(n)
+    for t in range(n):
+        r = float(np.exp(logp[t] - logp_old[t]))
+        unclipped = r * advantages[t]
+        clipped = min(max(r, 1.0 - epsilon), 1.0 + epsilon) * advantages[t]
+        total += min(unclipped, clipped)
+        grad[t] = unclipped / n if unclipped <= clipped else 0.0
+    return total / n, grad
+
+
+VARIANTS = {
+    "clip_objective_case_by_case": {"clip_objective": clip_objective_case_by_case},
+    "clip_objective_loop": {"clip_objective": clip_objective_loop},
+}
