@@ -46,8 +46,9 @@ def _newest_source_mtime() -> float:
 def built_book() -> Path:
     """The book's HTML, built with ``jupyter-book build book/ -W -n --keep-going`` if it is missing or older than its
     sources."""
-    index = BOOK_HTML / "index.html"
-    if not index.exists() or index.stat().st_mtime < _newest_source_mtime():
+    # searchindex.js is written by every build; index.html (a redirect written once) keeps its first build's time
+    stamp = BOOK_HTML / "searchindex.js"
+    if not stamp.exists() or stamp.stat().st_mtime < _newest_source_mtime():
         result = subprocess.run(
             ["jupyter-book", "build", str(ROOT / "book"), "-W", "-n", "--keep-going"],
             capture_output=True,
