@@ -42,7 +42,8 @@ def parse(path):
 
 
 def test_the_toc_names_the_course():
-    assert CHAPTERS[:2] == ["intro", "notation"]
+    assert CHAPTERS[:3] == ["intro", "why-ppo", "notation"]  # the "why" page comes before chapter 1
+    assert "references" in CHAPTERS
     assert len(NUMBERED) >= 12
 
 
@@ -66,3 +67,40 @@ def test_every_chapter_ran_its_code_and_drew_a_figure(built_book, name):
     computed = [src for src in images if "_images/" in src or src.startswith("data:image")]
     assert computed, f"{name} has no figure computed by the page"
     assert "Exercise" in text or name.startswith("11-"), f"{name} has no exercises section"
+
+
+def section_titles(path):
+    """The titles of a page's level-2 sections, in order."""
+    return [
+        re.sub(r"<[^>]+>|#", "", title).strip()
+        for title in re.findall(r"<h2>(.*?)</h2>", path.read_text(encoding="utf-8"), re.S)
+    ]
+
+
+@pytest.mark.timeout(1800)
+@pytest.mark.parametrize("name", NUMBERED)
+def test_every_chapter_ends_with_a_summary_and_further_reading(built_book, name):
+    titles = section_titles(built_book / f"{name}.html")
+    assert "Summary" in titles and "Further reading" in titles, f"{name}: sections {titles}"
+    summary, further = titles.index("Summary"), titles.index("Further reading")
+    assert further == summary + 1, f"{name}: Further reading should follow the Summary"
+    if "What goes wrong" in titles:
+        assert titles.index("What goes wrong") < summary, f"{name}: the Summary comes after What goes wrong"
+    exercises = [i for i, title in enumerate(titles) if title.startswith("Exercise")]
+    assert exercises and exercises[0] > further, f"{name}: the exercises come last"
+
+
+@pytest.mark.timeout(1800)
+def test_the_bibliography_lists_only_what_the_chapters_cite(built_book):
+    keys = re.findall(r"^@\w+\{(\w+),", (ROOT / "book" / "references.bib").read_text(), re.M)
+    sources = {path.stem: path.read_text(encoding="utf-8") for path in (ROOT / "book").glob("*.md")}
+    cited = set()
+    for text in sources.values():
+        for group in re.findall(r"\{cite(?::t|:p)?\}`([^`]+)`", text):
+            cited.update(key.strip() for key in group.split(","))
+    assert len(keys) >= 12
+    assert not set(keys) - cited, f"in references.bib but never cited: {set(keys) - cited}"
+    assert not cited - set(keys), f"cited but not in references.bib: {cited - set(keys)}"
+    page = (built_book / "references.html").read_text(encoding="utf-8")
+    entries = re.findall(r'<div class="citation" id="id\d+"|<dt class="label" id="', page)
+    assert len(entries) >= len(keys), f"the bibliography page shows {len(entries)} of {len(keys)} entries"
