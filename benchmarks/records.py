@@ -12,6 +12,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from minippo.sweep import append_row as write_row  # one CSV writer: the header once, each row flushed to disk
+
 ROOT = Path(__file__).resolve().parent.parent  # the repository
 RESULTS = ROOT / "benchmarks" / "results"
 RUNS = ROOT / "benchmarks" / "runs"
@@ -75,16 +77,21 @@ def append_row(path, fields: list[str], row: dict, unique: tuple[str, ...] | Non
         key = tuple(str(row[k]) for k in unique)
         if any(tuple(old[k] for k in unique) == key for old in existing):
             return False
-    path.parent.mkdir(parents=True, exist_ok=True)
-    new = not path.exists() or path.stat().st_size == 0
-    with open(path, "a", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=fields, lineterminator="\n")
-        if new:
-            writer.writeheader()
-        writer.writerow({k: row[k] for k in fields})
-        handle.flush()
-        os.fsync(handle.fileno())
+    write_row(path, fields, {k: row[k] for k in fields})
     return True
+
+
+def record_row(run, row: dict) -> dict:
+    """A runs record's row for a finished run: its labels (setting, task, seed), then what the sweep measured."""
+    return {
+        **run.labels,
+        "steps": int(row["steps"]),
+        "return_mean": round(float(row["return_mean"]), 2),
+        "wall_s": round(float(row["wall_s"]), 1),
+        "steps_per_s": round(float(row["steps_per_s"]), 1),
+        "commit": row["commit"],
+        "command": row["command"],
+    }
 
 
 def is_recorded(path, key: dict) -> bool:

@@ -50,20 +50,6 @@ def sweep_runs(envs, seeds, steps) -> list:
     ]
 
 
-def record_row(run, row: dict) -> dict:
-    """The mujoco.csv row of a finished run, from its row in the sweep's CSV."""
-    return {
-        "env": run.labels["env"],
-        "seed": run.labels["seed"],
-        "steps": int(row["steps"]),
-        "return_mean": round(float(row["return_mean"]), 2),
-        "wall_s": round(float(row["wall_s"]), 1),
-        "steps_per_s": round(float(row["steps_per_s"]), 1),
-        "commit": row["commit"],
-        "command": row["command"],
-    }
-
-
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--envs", nargs="+", default=TASKS, metavar="ENV")
@@ -88,7 +74,7 @@ def main(argv=None) -> int:
             if run.key() not in done:
                 print(f"to do     {run.labels['env']:<26} seed {run.labels['seed']}")
         return 0
-    return records.run_sweep(runs, args.runs, args.csv, FIELDS, ("env", "seed"), record_row, args)
+    return records.run_sweep(runs, args.runs, args.csv, FIELDS, ("env", "seed"), records.record_row, args)
 
 
 if __name__ == "__main__":

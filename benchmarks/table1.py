@@ -230,19 +230,6 @@ def sweep_runs(settings, envs, seeds, steps) -> list:
     return runs
 
 
-def record_row(run, row: dict) -> dict:
-    """The runs record's row of a finished run, from its row in the sweep's CSV."""
-    return {
-        **run.labels,
-        "steps": int(row["steps"]),
-        "return_mean": round(float(row["return_mean"]), 2),
-        "wall_s": round(float(row["wall_s"]), 1),
-        "steps_per_s": round(float(row["steps_per_s"]), 1),
-        "commit": row["commit"],
-        "command": row["command"],
-    }
-
-
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--envs", nargs="+", default=TASKS, metavar="ENV")
@@ -294,7 +281,7 @@ def main(argv=None) -> int:
                 )
             runs = sweep_runs(settings, args.envs, args.seeds, args.steps)
             fields, key = RUN_FIELDS, ("setting", "env", "seed")
-            code = records.run_sweep(runs, args.runs, args.runs_csv, fields, key, record_row, args)
+            code = records.run_sweep(runs, args.runs, args.runs_csv, fields, key, records.record_row, args)
             if code == 130:  # interrupted: the table waits for the next run of the command
                 return code
         table = write_table(args.runs_csv, args.random_csv, args.table_csv, args.envs, args.seeds, args.steps)
