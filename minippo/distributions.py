@@ -71,11 +71,14 @@ class DiagGaussian:
 
     ``log_std`` has shape (k,) for the policy being trained. The old policy π_θold of a stored batch may carry it as
     (n, k), one copy per sample, since the batch is shuffled and cut into minibatches like every other per-sample
-    array; its log-probability, entropy and KL read it the same way (the backward functions are for the (k,) case)."""
+    array; its log-probability, entropy and KL read it the same way (the backward functions are for the (k,) case).
+
+    The distribution keeps its own copy of log σ, as a Categorical keeps its own log-probabilities: a π_θ built now
+    stays this π_θ when an optimiser later moves the agent's log σ in place, so it can serve as a fixed π_θold."""
 
     def __init__(self, mean: np.ndarray, log_std: np.ndarray):
         self.mean = mean
-        self.log_std = log_std
+        self.log_std = np.array(log_std)
         self.std = np.exp(log_std)
 
     def sample(self, rng: np.random.Generator) -> np.ndarray:

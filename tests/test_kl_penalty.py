@@ -110,6 +110,20 @@ def test_one_klpen_update_hands_the_beta_rule_the_papers_kl(env_id, monkeypatch)
     assert seen["kl"] == pytest.approx(float(reference), rel=1e-3)
 
 
+def test_a_policy_built_before_an_update_stays_the_old_policy(rng):
+    """π_θ taken from the agent before some Adam steps is π_θold afterwards: its σ must not follow the agent's log σ,
+    which the optimiser moves in place (the same trap as a batch without its own log σ)."""
+    agent = ActorCritic(3, "continuous", 2, hidden_sizes=(8,), log_std_init=-0.5, rng=rng)
+    obs = rng.standard_normal((16, 3))
+    before = agent.distribution(agent.policy_output(obs))
+    log_std_before = agent.log_std.copy()
+    agent.log_std[...] += np.array([0.25, -0.1])  # what an update does to the live parameters
+    after = agent.distribution(agent.policy_output(obs))
+    expected = closed_form_gaussian_kl(before.mean, log_std_before, after.mean, agent.log_std)
+    assert np.array_equal(before.log_std, log_std_before)
+    assert np.allclose(after.kl(before), expected, rtol=1e-12, atol=0) and expected.min() > 0.01
+
+
 def test_gaussian_kl_keeps_its_digits_when_sigma_barely_moves():
     log_std_old = np.array([0.3, -0.2])
     for delta in (1e-3, 1e-6, 1e-8):
