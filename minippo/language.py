@@ -124,8 +124,15 @@ def nll_and_grad(model: ActorCritic, obs: np.ndarray, targets: np.ndarray) -> fl
     return loss
 
 
-def pretrain(model: ActorCritic, tokens: np.ndarray, lengths: np.ndarray, rng: np.random.Generator,
-             epochs: int = 6, batch_size: int = 128, lr: float = 3e-3) -> list[float]:
+def pretrain(
+    model: ActorCritic,
+    tokens: np.ndarray,
+    lengths: np.ndarray,
+    rng: np.random.Generator,
+    epochs: int = 6,
+    batch_size: int = 128,
+    lr: float = 3e-3,
+) -> list[float]:
     """Maximum likelihood on the corpus: Adam on −log π(y_t | s_t) over every token of every sentence (the full stop
     included, so the model learns to end). Returns the mean loss of each epoch."""
     features = sequence_features(tokens)

@@ -57,9 +57,17 @@ class RLHFConfig:
 
     def ppo_config(self) -> Config:
         """The fields of minippo's Config that its minibatch update reads."""
-        return Config(objective=self.objective, clip_epsilon=self.clip_epsilon, value_coef=self.value_coef,
-                      entropy_coef=0.0, normalize_advantages=True, clip_value_loss=False, grad_norm_clipping=True,
-                      max_grad_norm=self.max_grad_norm, dtype="float64")
+        return Config(
+            objective=self.objective,
+            clip_epsilon=self.clip_epsilon,
+            value_coef=self.value_coef,
+            entropy_coef=0.0,
+            normalize_advantages=True,
+            clip_value_loss=False,
+            grad_norm_clipping=True,
+            max_grad_norm=self.max_grad_norm,
+            dtype="float64",
+        )
 
 
 def kl_shaped_rewards(logp, logp_ref, scores, lengths, beta: float) -> np.ndarray:
@@ -77,8 +85,9 @@ def copy_model(model: ActorCritic) -> ActorCritic:
     return twin
 
 
-def collect(agent: ActorCritic, reference: ActorCritic, reward_model: RewardModel, n: int, beta: float,
-            rng: np.random.Generator) -> dict:
+def collect(
+    agent: ActorCritic, reference: ActorCritic, reward_model: RewardModel, n: int, beta: float, rng: np.random.Generator
+) -> dict:
     """Generate n sequences with π_θold and score them: everything PPO needs, as (n, T) arrays."""
     T = MAX_LEN
     tokens = np.full((n, T), TOKEN[BOS], dtype=np.int64)
@@ -99,8 +108,16 @@ def collect(agent: ActorCritic, reference: ActorCritic, reward_model: RewardMode
         done |= ended
     scores = reward_model.score(tokens, lengths)
     rewards = kl_shaped_rewards(logp, logp_ref, scores, lengths, beta)
-    return {"tokens": tokens, "lengths": lengths, "obs": obs, "logp": logp, "logp_ref": logp_ref, "values": values,
-            "scores": scores, "rewards": rewards}
+    return {
+        "tokens": tokens,
+        "lengths": lengths,
+        "obs": obs,
+        "logp": logp,
+        "logp_ref": logp_ref,
+        "values": values,
+        "scores": scores,
+        "rewards": rewards,
+    }
 
 
 def token_advantages(batch: dict, gamma: float, lam: float):
@@ -109,16 +126,19 @@ def token_advantages(batch: dict, gamma: float, lam: float):
     steps = np.arange(T)[None, :]
     terminated = steps >= batch["lengths"][:, None] - 1
     next_values = np.concatenate([batch["values"][:, 1:], np.zeros((n, 1))], axis=1)
-    advantages = adv.gae(batch["rewards"].T, batch["values"].T, next_values.T, terminated.T,
-                         np.zeros((T, n), dtype=bool), gamma, lam).T
+    advantages = adv.gae(
+        batch["rewards"].T, batch["values"].T, next_values.T, terminated.T, np.zeros((T, n), dtype=bool), gamma, lam
+    ).T
     return advantages, advantages + batch["values"]
 
 
 def sequence_stats(tokens, lengths) -> dict:
     """What the rater thinks of the sequences: its mean score and the fraction of well-formed sentences."""
     texts = [[VOCAB[t] for t in row[:length]] for row, length in zip(tokens, lengths)]
-    return {"rater_score": float(np.mean([rater_score(words) for words in texts])),
-            "well_formed": float(np.mean([is_well_formed(words) for words in texts]))}
+    return {
+        "rater_score": float(np.mean([rater_score(words) for words in texts])),
+        "well_formed": float(np.mean([is_well_formed(words) for words in texts])),
+    }
 
 
 def train_rlhf(pretrained: ActorCritic, reward_model: RewardModel, config: RLHFConfig, on_update=None):
@@ -134,8 +154,14 @@ def train_rlhf(pretrained: ActorCritic, reward_model: RewardModel, config: RLHFC
         batch = collect(agent, reference, reward_model, config.sequences, beta, rng)
         advantages, returns = token_advantages(batch, config.gamma, config.gae_lambda)
         valid = np.arange(MAX_LEN)[None, :] < batch["lengths"][:, None]
-        data = {"obs": batch["obs"][valid], "actions": batch["tokens"][valid], "logp": batch["logp"][valid],
-                "values": batch["values"][valid], "advantages": advantages[valid], "returns": returns[valid]}
+        data = {
+            "obs": batch["obs"][valid],
+            "actions": batch["tokens"][valid],
+            "logp": batch["logp"][valid],
+            "values": batch["values"][valid],
+            "advantages": advantages[valid],
+            "returns": returns[valid],
+        }
         n = len(data["logp"])
         for _ in range(config.epochs):
             order = rng.permutation(n)
@@ -176,11 +202,14 @@ def pretrained_pieces(seed: int = 0, corpus_size: int = 3000, pairs: int = 2000,
     reward_losses = reward_model.fit(preferred, rejected)
     held_out = make_preferences(pairs, rng)
     rule = [np.array([rater_score(VOCAB[t] for t in row[:n]) for row, n in zip(*side)]) for side in held_out]
-    record = {"pretrain_losses": pretrain_losses, "reward_losses": reward_losses,
-              "train_accuracy": reward_model.accuracy(preferred, rejected),
-              "held_out_accuracy": reward_model.accuracy(*held_out),
-              # the rater's own rule as a model: the most any model can agree with the rater's noisy choices
-              "rule_held_out_accuracy": float(np.mean((rule[0] > rule[1]) + 0.5 * (rule[0] == rule[1])))}
+    record = {
+        "pretrain_losses": pretrain_losses,
+        "reward_losses": reward_losses,
+        "train_accuracy": reward_model.accuracy(preferred, rejected),
+        "held_out_accuracy": reward_model.accuracy(*held_out),
+        # the rater's own rule as a model: the most any model can agree with the rater's noisy choices
+        "rule_held_out_accuracy": float(np.mean((rule[0] > rule[1]) + 0.5 * (rule[0] == rule[1]))),
+    }
     return model, reward_model, record
 
 

@@ -45,20 +45,25 @@ def test_config_names_the_repository_and_the_launch_services():
         assert CONFIG["html"][button] is True
 
 
-@pytest.mark.parametrize("url, parts", [
-    ("https://github.com/someone/minippo", ("someone", "minippo")),
-    ("https://github.com/someone/minippo.git", ("someone", "minippo")),
-    ("https://github.com/someone/minippo/", ("someone", "minippo")),
-    ("https://gitlab.com/someone/minippo", None),
-    ("https://github.com/someone", None),
-])
+@pytest.mark.parametrize(
+    "url, parts",
+    [
+        ("https://github.com/someone/minippo", ("someone", "minippo")),
+        ("https://github.com/someone/minippo.git", ("someone", "minippo")),
+        ("https://github.com/someone/minippo/", ("someone", "minippo")),
+        ("https://gitlab.com/someone/minippo", None),
+        ("https://github.com/someone", None),
+    ],
+)
 def test_repository_parts(url, parts):
     assert repository.repository_parts(url) == parts
 
 
 def test_the_environment_replaces_the_configured_repository(monkeypatch):
-    config = SimpleNamespace(html_theme_options={"repository_url": "https://github.com/minippo/minippo",
-                                                 "repository_branch": "main"}, html_baseurl="")
+    config = SimpleNamespace(
+        html_theme_options={"repository_url": "https://github.com/minippo/minippo", "repository_branch": "main"},
+        html_baseurl="",
+    )
     monkeypatch.setenv("BOOK_REPOSITORY_URL", "https://github.com/someone/fork.git")
     monkeypatch.setenv("BOOK_REPOSITORY_BRANCH", "trunk")
     monkeypatch.setenv("BOOK_SITE_URL", "https://someone.github.io/fork")
@@ -107,10 +112,21 @@ def test_description_is_cut_at_a_word():
 def fake_site(tmp_path: Path) -> Path:
     sources = tmp_path / "html" / "_sources"
     sources.mkdir(parents=True)
-    notebook = {"cells": [{"cell_type": "code", "execution_count": 1, "id": "a", "metadata": {},
-                           "outputs": [{"name": "stdout", "output_type": "stream", "text": ["2\n"]}],
-                           "source": ["print(1 + 1)"]}],
-                "metadata": {}, "nbformat": 4, "nbformat_minor": 5}
+    notebook = {
+        "cells": [
+            {
+                "cell_type": "code",
+                "execution_count": 1,
+                "id": "a",
+                "metadata": {},
+                "outputs": [{"name": "stdout", "output_type": "stream", "text": ["2\n"]}],
+                "source": ["print(1 + 1)"],
+            }
+        ],
+        "metadata": {},
+        "nbformat": 4,
+        "nbformat_minor": 5,
+    }
     (sources / "01-network.ipynb").write_text(json.dumps(notebook), encoding="utf-8")
     (sources / "01-network.md").write_text("# A network by hand\n", encoding="utf-8")
     return tmp_path / "html"
@@ -127,14 +143,19 @@ def test_notebooks_branch_adds_the_setup_cell_and_pins_the_commit(tmp_path):
     assert "https://github.com/someone/minippo" in setup_source and commit in setup_source
     compile(setup_source, "setup", "exec")  # the cell is Python
     assert original["outputs"][0]["text"] == ["2\n"]  # the executed outputs stay
-    assert (out / "requirements.txt").read_text().splitlines()[0] == f"minippo @ git+https://github.com/someone/minippo@{commit}"
+    assert (out / "requirements.txt").read_text().splitlines()[
+        0
+    ] == f"minippo @ git+https://github.com/someone/minippo@{commit}"
     assert sorted(p.name for p in out.iterdir()) == ["01-network.ipynb", "README.md", "requirements.txt", "runtime.txt"]
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["--repository", "https://gitlab.com/a/b", "--commit", "a" * 40], "--repository must look like"),
-    (["--repository", "https://github.com/a/b", "--commit", "abc123"], "--commit must be a full"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--repository", "https://gitlab.com/a/b", "--commit", "a" * 40], "--repository must look like"),
+        (["--repository", "https://github.com/a/b", "--commit", "abc123"], "--commit must be a full"),
+    ],
+)
 def test_notebooks_branch_refuses_bad_input_in_one_line(tmp_path, capsys, argv, message):
     assert notebooks_branch.main([str(tmp_path), str(tmp_path / "out"), *argv]) == 2
     err = capsys.readouterr().err
@@ -175,8 +196,10 @@ def test_chapter_offers_downloads_launches_and_repository_links(built_book, name
     assert repo in links
     assert any(link.startswith(f"{repo}/edit/") and link.endswith(f"book/{name}.md") for link in links)
     assert any(link.startswith(f"{repo}/issues/new") for link in links)
-    assert any(re.fullmatch(rf"https://mybinder\.org/v2/gh/{owner}/{project}/notebooks\?urlpath=lab/tree/{name}\.ipynb",
-                            link) for link in links)
+    assert any(
+        re.fullmatch(rf"https://mybinder\.org/v2/gh/{owner}/{project}/notebooks\?urlpath=lab/tree/{name}\.ipynb", link)
+        for link in links
+    )
     assert f"https://colab.research.google.com/github/{owner}/{project}/blob/notebooks/{name}.ipynb" in links
 
 

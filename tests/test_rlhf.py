@@ -19,8 +19,15 @@ from minippo.rlhf import (
 def test_the_grammar_writes_well_formed_sentences_and_the_checker_rejects_others(rng):
     for _ in range(200):
         assert lm.is_well_formed(lm.sample_sentence(rng))
-    for bad in ("the cat is good good .", "the cat is good", "cat the is good .", "the cat is good and .",
-                "the cat is very .", "the cat is good bad .", "the cat is good . ."):
+    for bad in (
+        "the cat is good good .",
+        "the cat is good",
+        "cat the is good .",
+        "the cat is good and .",
+        "the cat is very .",
+        "the cat is good bad .",
+        "the cat is good . .",
+    ):
         assert not lm.is_well_formed(bad.split()), bad
     assert lm.is_well_formed("my day was very good and bad but very new and old .".split())
 
@@ -91,8 +98,11 @@ def test_kl_shaped_rewards_by_hand():
 
 
 def test_token_advantages_restart_at_each_sequence_end():
-    batch = {"rewards": np.array([[0.0, 2.0, 5.0], [0.0, 0.0, 1.0]]), "values": np.zeros((2, 3)),
-             "lengths": np.array([2, 3])}
+    batch = {
+        "rewards": np.array([[0.0, 2.0, 5.0], [0.0, 0.0, 1.0]]),
+        "values": np.zeros((2, 3)),
+        "lengths": np.array([2, 3]),
+    }
     advantages, returns = token_advantages(batch, gamma=1.0, lam=1.0)
     assert_close(advantages, [[2.0, 2.0, 5.0], [1.0, 1.0, 1.0]])  # the 5 after the first sequence's end stays out
     assert_close(returns, advantages)
@@ -123,8 +133,10 @@ def test_ppo_on_tokens_raises_the_reward_with_a_bounded_kl_and_hacks_it_without_
     _, free = train_rlhf(model, reward_model, RLHFConfig(seed=0, beta=0.0, updates=40))
     assert np.array_equal(model.params, before), "the reference policy must stay frozen"
     start = np.mean([s["score"] for s in penalised[:3]])
-    end = {name: {k: np.mean([s[k] for s in run[-5:]]) for k in run[0]} for name, run in
-           (("penalised", penalised), ("free", free))}
+    end = {
+        name: {k: np.mean([s[k] for s in run[-5:]]) for k in run[0]}
+        for name, run in (("penalised", penalised), ("free", free))
+    }
     assert end["penalised"]["score"] > start + 1.0
     assert end["penalised"]["kl_to_reference"] < 4.0
     assert end["penalised"]["well_formed"] > 0.7
@@ -146,5 +158,6 @@ def test_the_same_seed_gives_the_same_run_bitwise(pieces):
     first, runs = train_rlhf(model, reward_model, config)
     second, again = train_rlhf(model, reward_model, config)
     assert np.array_equal(first.params, second.params) and runs == again
-    assert not np.array_equal(first.params, train_rlhf(model, reward_model, RLHFConfig(seed=4, beta=0.2, updates=2,
-                                                                                      sequences=16))[0].params)
+    assert not np.array_equal(
+        first.params, train_rlhf(model, reward_model, RLHFConfig(seed=4, beta=0.2, updates=2, sequences=16))[0].params
+    )

@@ -44,8 +44,10 @@ def mark_svg(background: str, line: str, faint: str) -> str:
 
 
 def icon(background: str = INK) -> str:
-    return (f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 64 64" width="64" height="64">'
-            f"<title>minippo</title>{mark_svg(background, PAPER, FAINT)}</svg>\n")
+    return (
+        f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 64 64" width="64" height="64">'
+        f"<title>minippo</title>{mark_svg(background, PAPER, FAINT)}</svg>\n"
+    )
 
 
 def logo(text: str, background: str) -> str:

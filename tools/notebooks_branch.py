@@ -19,7 +19,7 @@ import re
 import sys
 from pathlib import Path
 
-SETUP = '''\
+SETUP = """\
 # Opened outside a clone of the repository (Colab, Binder): fetch minippo at the commit this page was built from,
 # install it with the book's tools, and run from its book/ folder, where the chapters find the benchmark records.
 # In a clone, or run a second time, this cell does nothing.
@@ -35,7 +35,7 @@ if not Path("../minippo/__init__.py").exists():
     subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "./minippo-src", "myst-nb"], check=True)
     os.chdir("minippo-src/book")
     sys.path.insert(0, os.path.abspath(".."))
-'''
+"""
 
 README = """# The executed chapters of minippo's book
 
@@ -49,8 +49,14 @@ launch buttons. Edit the chapters in `book/*.md` on the default branch, never he
 
 def setup_cell(repository: str, commit: str) -> dict:
     source = SETUP.format(repository=repository, commit=commit)
-    return {"cell_type": "code", "execution_count": None, "id": "minippo-setup",
-            "metadata": {"tags": ["setup"]}, "outputs": [], "source": source.splitlines(keepends=True)}
+    return {
+        "cell_type": "code",
+        "execution_count": None,
+        "id": "minippo-setup",
+        "metadata": {"tags": ["setup"]},
+        "outputs": [],
+        "source": source.splitlines(keepends=True),
+    }
 
 
 def write_branch(html: Path, out: Path, repository: str, commit: str) -> list[str]:
@@ -78,8 +84,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--commit", required=True, help="the full commit the site was built from")
     args = parser.parse_args(argv)
     if not re.fullmatch(r"https://github\.com/[\w.-]+/[\w.-]+", args.repository):
-        print(f"error: --repository must look like https://github.com/OWNER/NAME, not {args.repository!r}",
-              file=sys.stderr)
+        print(
+            f"error: --repository must look like https://github.com/OWNER/NAME, not {args.repository!r}",
+            file=sys.stderr,
+        )
         return 2
     if not re.fullmatch(r"[0-9a-f]{40}", args.commit):
         print(f"error: --commit must be a full 40-digit commit, not {args.commit!r}", file=sys.stderr)

@@ -55,11 +55,9 @@ def _launch_from_notebooks_branch(app, pagename, templatename, context, doctree)
             continue
         for button in group["buttons"]:
             if button.get("text") == "Binder":
-                button["url"] = (f"{binderhub}/v2/gh/{owner}/{name}/{NOTEBOOKS_BRANCH}"
-                                 f"?urlpath=lab/tree/{pagename}.ipynb")
+                button["url"] = f"{binderhub}/v2/gh/{owner}/{name}/{NOTEBOOKS_BRANCH}?urlpath=lab/tree/{pagename}.ipynb"
             elif button.get("text") == "Colab":
-                button["url"] = (f"{colab}/github/{owner}/{name}/blob/{NOTEBOOKS_BRANCH}/"
-                                 f"{pagename}.ipynb")
+                button["url"] = f"{colab}/github/{owner}/{name}/blob/{NOTEBOOKS_BRANCH}/{pagename}.ipynb"
 
 
 def setup(app):
