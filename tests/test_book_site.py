@@ -106,6 +106,12 @@ def test_description_is_cut_at_a_word():
     assert social_meta.shorten("short enough") == "short enough"
 
 
+def test_description_writes_inline_math_plainly():
+    assert social_meta.plain_math(r"\theta_{\text{old}}") == "θ_old"
+    assert social_meta.plain_math(r"L^{CLIP}(\theta)") == "L^CLIP(θ)"
+    assert social_meta.plain_math(r"\hat{A}_t") == "A_t"
+
+
 # ---- the notebooks branch -------------------------------------------------------------------------------------------
 
 

@@ -16,9 +16,28 @@ TOUCH_ICON = "_static/apple-touch-icon.png"  # 180 × 180, the icon a phone puts
 LENGTH = 200
 
 
+GREEK = dict(zip(["alpha", "beta", "gamma", "delta", "epsilon", "theta", "lambda", "mu", "pi", "sigma"], "αβγδεθλμπσ"))
+
+
+def plain_math(tex: str) -> str:
+    """Inline TeX as a preview can show it: '\\theta_{\\text{old}}' -> 'θ_old', 'L^{CLIP}' -> 'L^CLIP'; other commands
+    (\\text, \\hat, \\mathrm, ...) are dropped and their argument kept."""
+    text = re.sub(r"\\([A-Za-z]+)\s*", lambda m: GREEK.get(m[1], ""), tex)
+    return re.sub(r"\s+", " ", text.replace("{", "").replace("}", "")).strip()
+
+
+def plain_text(node) -> str:
+    """A paragraph's text with its inline math written plainly."""
+    if isinstance(node, nodes.math):
+        return plain_math(node.astext())
+    if isinstance(node, nodes.Text):
+        return str(node)
+    return "".join(plain_text(child) for child in node.children)
+
+
 def first_paragraph(doctree) -> str:
     for paragraph in doctree.findall(nodes.paragraph):
-        text = re.sub(r"\s+", " ", paragraph.astext()).strip()
+        text = re.sub(r"\s+", " ", plain_text(paragraph)).strip()
         if len(text) >= 40:  # skip captions and one-line labels
             return text
     return ""
