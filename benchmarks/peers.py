@@ -80,7 +80,7 @@ def sb3_settings(config: Config) -> dict:
             # same loss, hence the same gradient and the same global-norm clip
             "vf_coef": config.value_coef / 2,
             "max_grad_norm": config.max_grad_norm if config.grad_norm_clipping else float("inf"),
-            "target_kl": config.target_kl,
+            "target_kl": config.target_kl,  # None in both (the paper has no early stop); SB3's rule would differ
             "policy_kwargs": {
                 "net_arch": {"pi": list(config.hidden_sizes), "vf": list(config.hidden_sizes)},
                 "activation_fn": "tanh",
