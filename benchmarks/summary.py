@@ -5,7 +5,8 @@
     python benchmarks/summary.py --readme        # rewrite the README's generated blocks from the records
 
 Reads only committed records: results/mujoco.csv and the run folders' progress.csv (learning curves),
-results/table1.csv and results/random.csv, results/speed.csv. Nothing in the output is typed in except the
+results/table1.csv and results/random.csv, results/speed.csv, results/peers.csv (minippo beside Stable-Baselines3,
+with Welch's interval for each difference, computed here without SciPy). Nothing in the output is typed in except the
 paper's and CleanRL's reference numbers below, quoted with their sources.
 """
 
@@ -261,6 +262,224 @@ def speed_sentence(rows: list[dict]) -> str:
             f"({float(raw['steps_per_s']):.0f} steps/s)"
         )
     return text + "."
+
+
+# minippo beside Stable-Baselines3 (peers.csv): Welch's interval for the difference of two means
+
+
+def regularized_beta(x: float, a: float, b: float) -> float:
+    """I_x(a, b), the regularised incomplete beta function, by its continued fraction (modified Lentz), on the side
+    of x where the fraction converges fast."""
+    if x <= 0.0:
+        return 0.0
+    if x >= 1.0:
+        return 1.0
+    if x > (a + 1.0) / (a + b + 2.0):
+        return 1.0 - regularized_beta(1.0 - x, b, a)
+    log_front = math.lgamma(a + b) - math.lgamma(a) - math.lgamma(b) + a * math.log(x) + b * math.log1p(-x)
+    tiny = 1e-300
+
+    def guarded(value: float) -> float:
+        return value if abs(value) > tiny else tiny
+
+    c, d = 1.0, 1.0 / guarded(1.0 - (a + b) * x / (a + 1.0))
+    fraction = d
+    for m in range(1, 500):
+        for term in (
+            m * (b - m) * x / ((a + 2 * m - 1) * (a + 2 * m)),  # the even step of the fraction
+            -(a + m) * (a + b + m) * x / ((a + 2 * m) * (a + 2 * m + 1)),  # the odd step
+        ):
+            d = 1.0 / guarded(1.0 + term * d)
+            c = guarded(1.0 + term / c)
+            fraction *= c * d
+        if abs(c * d - 1.0) < 1e-15:
+            break
+    return math.exp(log_front) * fraction / a
+
+
+def t_cdf(t: float, df: float) -> float:
+    """P(T ≤ t) for Student's t with ``df`` degrees of freedom (any df > 0, not only whole numbers):
+    P(|T| > |t|) = I_{df/(df + t²)}(df/2, 1/2)."""
+    tail = 0.5 * regularized_beta(df / (df + t * t), df / 2.0, 0.5)
+    return 1.0 - tail if t >= 0 else tail
+
+
+def t_quantile(p: float, df: float) -> float:
+    """The t with P(T ≤ t) = p, by bisection on ``t_cdf`` (to about 1e-12)."""
+    if not 0.0 < p < 1.0:
+        raise ValueError(f"p must lie in (0, 1), not {p}")
+    if p < 0.5:
+        return -t_quantile(1.0 - p, df)
+    low, high = 0.0, 1.0
+    while t_cdf(high, df) < p:
+        low, high = high, 2.0 * high
+    for _ in range(200):
+        middle = 0.5 * (low + high)
+        if t_cdf(middle, df) < p:
+            low = middle
+        else:
+            high = middle
+        if high - low < 1e-12 * max(1.0, high):
+            break
+    return 0.5 * (low + high)
+
+
+def welch_interval(first: list[float], second: list[float], level: float = 0.95) -> dict:
+    """Welch's t interval for mean(first) − mean(second), the variances not assumed equal: the difference ± t·se,
+    se² = s₁²/n₁ + s₂²/n₂, t the (1 + level)/2 quantile at the Welch–Satterthwaite degrees of freedom
+    df = se⁴ / ((s₁²/n₁)²/(n₁ − 1) + (s₂²/n₂)²/(n₂ − 1)). Each sample needs two values at least."""
+    if len(first) < 2 or len(second) < 2:
+        raise ValueError("Welch's interval needs at least two values in each sample")
+    diff = statistics.fmean(first) - statistics.fmean(second)
+    part1 = statistics.variance(first) / len(first)
+    part2 = statistics.variance(second) / len(second)
+    se = math.sqrt(part1 + part2)
+    if se == 0.0:  # both samples constant: no spread to speak of
+        return {"diff": diff, "low": diff, "high": diff, "se": 0.0, "df": math.inf}
+    df = (part1 + part2) ** 2 / (part1**2 / (len(first) - 1) + part2**2 / (len(second) - 1))
+    half = t_quantile(0.5 + level / 2.0, df) * se
+    return {"diff": diff, "low": diff - half, "high": diff + half, "se": se, "df": df}
+
+
+def standing(interval: dict) -> str:
+    """ahead / behind when the interval excludes 0 (on its side), level when it includes 0."""
+    if interval["low"] > 0:
+        return "ahead"
+    if interval["high"] < 0:
+        return "behind"
+    return "level"
+
+
+PEER_LIBRARIES = {"minippo": "minippo", "sb3": "SB3"}
+PEER_SCORES = {
+    "return_mean": ("train", "training score (last 100 episodes)"),
+    "eval_mean": ("eval", "deterministic evaluation (10 episodes)"),
+}
+
+
+def peers_stats(rows: list[dict]) -> dict[tuple, dict]:
+    """Per (task, steps), in the runner's task order: each library's seeds, its train and eval scores (mean, standard
+    error over seeds, n) and minutes per run, and for each score the Welch interval of minippo − SB3 with its
+    standing (None while a library has fewer than 2 seeds: incomplete)."""
+    from peers import TASKS as PEER_TASKS
+
+    groups: dict[tuple, dict[str, list[dict]]] = {}
+    for row in rows:
+        groups.setdefault((row["task"], int(row["steps"])), {}).setdefault(row["library"], []).append(row)
+    order = {task: i for i, task in enumerate(PEER_TASKS)}
+    stats = {}
+    for key in sorted(groups, key=lambda key: (order.get(key[0], len(order)), key[0], key[1])):
+        entry: dict = {"libraries": {}, "compared": {}}
+        for library in PEER_LIBRARIES:
+            runs = sorted(groups[key].get(library, []), key=lambda row: int(row["seed"]))
+            scores = {}
+            for column in PEER_SCORES:
+                values = [float(row[column]) for row in runs]
+                se = statistics.stdev(values) / math.sqrt(len(values)) if len(values) > 1 else None
+                scores[column] = {"values": values, "mean": statistics.fmean(values) if values else None, "se": se}
+            entry["libraries"][library] = {
+                "seeds": [int(row["seed"]) for row in runs],
+                "scores": scores,
+                "minutes": statistics.fmean(float(row["wall_s"]) for row in runs) / 60 if runs else None,
+                "versions": sorted({row["version"] for row in runs}),
+                "commits": sorted({row["commit"] for row in runs}),
+            }
+        complete = all(len(entry["libraries"][library]["seeds"]) >= 2 for library in PEER_LIBRARIES)
+        for column in PEER_SCORES:
+            if complete:
+                mine, theirs = (entry["libraries"][library]["scores"][column]["values"] for library in PEER_LIBRARIES)
+                interval = welch_interval(mine, theirs)
+                entry["compared"][column] = {**interval, "standing": standing(interval)}
+            else:
+                entry["compared"][column] = None
+        stats[key] = entry
+    return stats
+
+
+def number(value: float, digits: int, sign: bool = False) -> str:
+    return f"{value:+,.{digits}f}" if sign else f"{value:,.{digits}f}"
+
+
+def peers_lines(rows: list[dict]) -> list[str]:
+    """The side-by-side table (per task, each library's mean ± standard error of both scores, minippo − SB3 with
+    its 95% Welch interval, minutes per run) and one sentence per task: ahead, level or behind at equal steps."""
+    if not rows:
+        return ["No side-by-side runs are recorded yet (`python benchmarks/peers.py`)."]
+    stats = peers_stats(rows)
+    lines = [
+        "minippo's PPO and Stable-Baselines3's PPO with the paper's settings in both (how each setting was matched, "
+        "and where the two cannot match: `benchmarks/README.md`), the same tasks and seeds, each run a Ray task of one "
+        "CPU and one math thread on the same machine (`benchmarks/results/peers.csv`, made by "
+        "`python benchmarks/peers.py`). Train: the mean return of the run's last 100 training episodes; eval: the "
+        "final policy's mean action over 10 episodes (reset seeds 0–9). Each cell is the mean over seeds ± its "
+        "standard error (n seeds); the difference minippo − SB3 has Welch's 95% t interval, and a library is ahead "
+        "or behind when the interval excludes 0, level when it includes 0.",
+        "",
+        "| Task | steps | score | minippo | SB3 | minippo − SB3 [95% interval] | standing | minutes per run, "
+        "minippo / SB3 |",
+        "|---|---:|---|---:|---:|---:|:---:|---:|",
+    ]
+    sentences = []
+    for (task, steps), entry in stats.items():
+        libraries = entry["libraries"]
+        means = [s["mean"] for lib in libraries.values() for s in lib["scores"].values() if s["mean"] is not None]
+        digits = 0 if max(abs(value) for value in means) >= 100 else 1
+        minutes = " / ".join("—" if lib["minutes"] is None else f"{lib['minutes']:.1f}" for lib in libraries.values())
+        for column, (short, _) in PEER_SCORES.items():
+            cells = []
+            for library in PEER_LIBRARIES:
+                score, n = libraries[library]["scores"][column], len(libraries[library]["seeds"])
+                if score["mean"] is None:
+                    cells.append("—")
+                elif score["se"] is None:
+                    cells.append(f"{number(score['mean'], digits)} (n = {n})")
+                else:
+                    cells.append(f"{number(score['mean'], digits)} ± {number(score['se'], digits)} (n = {n})")
+            compared = entry["compared"][column]
+            if compared is None:
+                difference, verdict = "—", "incomplete"
+            else:
+                difference = (
+                    f"{number(compared['diff'], digits, True)} [{number(compared['low'], digits, True)}, "
+                    f"{number(compared['high'], digits, True)}]"
+                )
+                verdict = compared["standing"]
+            lines.append(
+                f"| {task} | {steps:,} | {short} | {cells[0]} | {cells[1]} | {difference} | {verdict} "
+                f"| {minutes if column == 'return_mean' else ''} |"
+            )
+        sentences.append("- " + peers_sentence(task, steps, entry, digits))
+    versions = sorted(
+        {version for entry in stats.values() for lib in entry["libraries"].values() for version in lib["versions"]}
+    )
+    commits = sorted(
+        {commit for entry in stats.values() for lib in entry["libraries"].values() for commit in lib["commits"]}
+    )
+    lines += ["", *sentences, "", f"Versions: {'; '.join(versions)}. Commit(s): {', '.join(commits)}."]
+    return lines
+
+
+def peers_sentence(task: str, steps: int, entry: dict, digits: int) -> str:
+    """One task in a sentence: the standing on the training score, with the evaluation's beside it."""
+    counts = {library: len(lib["seeds"]) for library, lib in entry["libraries"].items()}
+    seeds = ", ".join(f"{PEER_LIBRARIES[library]} {n} seed{'s' if n != 1 else ''}" for library, n in counts.items())
+    train, evaluation = entry["compared"]["return_mean"], entry["compared"]["eval_mean"]
+    if train is None:
+        return f"{task}, {steps:,} steps: incomplete ({seeds}; each library needs 2 seeds at least), no standing yet."
+
+    def difference(compared: dict) -> str:
+        return (
+            f"{number(compared['diff'], digits, True)} (95% interval {number(compared['low'], digits, True)} to "
+            f"{number(compared['high'], digits, True)})"
+        )
+
+    wording = {"ahead": "ahead of", "level": "level with", "behind": "behind"}
+    text = (
+        f"{task}, {steps:,} steps ({seeds}): minippo is {wording[train['standing']]} SB3 at equal steps; minippo − "
+        f"SB3 is {difference(train)} on the training score"
+    )
+    there = evaluation["standing"] + (" too" if evaluation["standing"] == train["standing"] else "")
+    return text + f", and {difference(evaluation)} on the deterministic evaluation, where it is {there}."
 
 
 def recheck_lines(rows: list[dict], record: str = "hopper_recheck.csv", how: str = "trained again") -> list[str]:
@@ -824,6 +1043,7 @@ def build(results, runs_root) -> tuple[str, list[str]]:
     ]
     if table1:
         parts += ["![Table 1: minippo's scores beside the paper's](table1.png)", ""]
+    parts += ["## Side by side with Stable-Baselines3", "", *peers_lines(records.read_rows(results / "peers.csv")), ""]
     parts += ["## Speed race", "", *speed_lines(speed), ""]
     return "\n".join(parts), table
 

@@ -72,12 +72,15 @@ LOOPBACK = ("127.0.0.1", "localhost", "::1")
 @dataclass
 class Run:
     """One training of a sweep: its folder name, its Config, the CSV columns that name it (``labels``) and the
-    ``minippo train`` options that make the same training alone (``options``, after ENV --steps --seed --out)."""
+    ``minippo train`` options that make the same training alone (``options``, after ENV --steps --seed --out).
+    ``task``: the function its Ray task runs instead of ``train_run``, called the same way and returning the same
+    kind of result (the benchmarks' side-by-side runner trains another library's PPO with it)."""
 
     name: str
     config: Config
     labels: dict
     options: list = field(default_factory=list)
+    task: object = None
 
     def key(self) -> tuple:
         return tuple(str(value) for value in self.labels.values())
@@ -460,16 +463,17 @@ def interrupt_after():
 
 
 def execute(runs: list[Run], on_result, workers=None, address=None, retries=0, progress=None) -> None:
-    """Train ``runs`` as Ray tasks of one CPU each and call ``on_result(run, result, error, attempts)`` as each one
-    ends: the task's result and "" when it trained, None and a one-line reason when its last attempt failed.
+    """Train ``runs`` as Ray tasks of one CPU each (``train_run``, or a run's own ``task``) and call
+    ``on_result(run, result, error, attempts)`` as each one ends: the task's result and "" when it trained, None and
+    a one-line reason when its last attempt failed.
 
     Ctrl-C: the runs that have finished are handed to ``on_result``, the others are cancelled (their workers
     killed), and KeyboardInterrupt goes on up."""
     ray, started = start_ray(workers, address)
     pending: dict = {}  # ObjectRef -> (run, attempt)
     bar = progress(len(runs)) if progress else None
+    tasks: dict = {}  # the function a run trains with (train_run unless Run.task) -> its Ray task
     try:
-        task = ray.remote(train_run).options(num_cpus=1, max_retries=0)
         board = ray.remote(num_cpus=0)(Board).remote()
         window = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
         queue = [(run, 1) for run in runs]
@@ -477,7 +481,10 @@ def execute(runs: list[Run], on_result, workers=None, address=None, retries=0, p
         while queue or pending:
             while queue and len(pending) < window:
                 run, attempt = queue.pop(0)
-                pending[task.remote(run.config.to_dict(), run.name, board)] = (run, attempt)
+                function = run.task or train_run
+                if function not in tasks:
+                    tasks[function] = ray.remote(function).options(num_cpus=1, max_retries=0)
+                pending[tasks[function].remote(run.config.to_dict(), run.name, board)] = (run, attempt)
             ready, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)
             for ref in ready:
                 run, attempt = pending.pop(ref)

@@ -1,0 +1,425 @@
+"""Learning quality side by side with Stable-Baselines3: minippo's PPO and SB3's PPO on the same tasks, with the same
+settings (the paper's MuJoCo settings), the same seeds, on the same machine, as a sweep on minippo sweep's engine.
+
+    python benchmarks/peers.py                       # 3 tasks × seeds 1–5 × 2 libraries × 1M steps: 30 runs
+    python benchmarks/peers.py --tasks Hopper-v5 --seeds 1 2 --libraries sb3
+    python benchmarks/peers.py --address HOST:PORT   # on a running Ray cluster
+    python benchmarks/peers.py --list                # what is recorded, what is left
+
+Every run is a Ray task of one CPU and one math thread (one BLAS thread for minippo, one torch thread for SB3). A
+minippo run is exactly ``minippo train TASK --steps N --seed S`` (the defaults are the paper's settings); an SB3 run
+is ``stable_baselines3.PPO`` with every setting translated from the same ``Config`` by ``sb3_settings`` (the README
+of benchmarks/ tabulates how each setting was matched, and where the two cannot match). Both are scored the same
+way: the mean return of the last 100 training episodes (original rewards), and the mean return of the final
+policy's deterministic actions over 10 episodes (reset seeds 0–9, observation statistics frozen). When a run
+finishes, one row goes to benchmarks/results/peers.csv and its folder to benchmarks/runs/peers/<library>-TASK-seedS/
+(minippo's as ``minippo train`` writes it; SB3's with the learning curve in the same progress.csv columns and its
+settings in config.json). Recorded runs are skipped, so the same command resumes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import os
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import records  # noqa: E402
+
+from minippo.ppo import Config  # noqa: E402
+from minippo.sweep import Record, Run, Sweep  # noqa: E402
+
+TASKS = ["Hopper-v5", "HalfCheetah-v5", "Walker2d-v5"]
+SEEDS = [1, 2, 3, 4, 5]
+STEPS = 1_000_000
+LIBRARIES = ["minippo", "sb3"]
+NAMES = {"minippo": "minippo", "sb3": "Stable-Baselines3"}
+EVAL_EPISODES, EVAL_SEED = 10, 0  # minippo eval's defaults: episode k is reset with seed EVAL_SEED + k
+FIELDS = ["library", "version", "task", "seed", "steps", "return_mean", "eval_mean", "wall_s", "commit", "command"]
+KEY = ("library", "task", "seed")
+CSV_PATH = records.RESULTS / "peers.csv"
+RUN_ROOT = records.RUNS / "peers"
+SB3_MISSING = (
+    'Stable-Baselines3 is not installed: pip install torch==2.13.0 (the CPU wheel) and then pip install -e ".[peers]"'
+)
+
+
+# SB3's settings, from minippo's Config
+
+
+def sb3_settings(config: Config) -> dict:
+    """The arguments of ``stable_baselines3.PPO`` and ``VecNormalize`` that make SB3 train as minippo does with
+    ``config`` (JSON: the task turns the names into torch objects). Where SB3 cannot do what minippo does, the
+    comment says so; benchmarks/README.md has the whole table."""
+    batch = config.num_envs * config.horizon
+    return {
+        "ppo": {
+            "n_steps": config.horizon,
+            "batch_size": config.minibatch_size,
+            "n_epochs": config.epochs,
+            # minippo's update k (1-based) of K steps at lr·(1 − (k − 1)/K). SB3 calls the schedule with the
+            # progress remaining after update k's rollout, 1 − k/K, so lr·(p + 1/K) gives the same step size.
+            "learning_rate": {"initial": config.lr, "anneal": config.anneal_lr, "plus": 1 / config.num_updates},
+            "gamma": config.gamma,
+            "gae_lambda": config.gae_lambda,
+            "clip_range": config.clip_epsilon,
+            # SB3 can clip the value only by replacing it (no max with the unclipped loss, as minippo's): left off
+            "clip_range_vf": None,
+            "normalize_advantage": config.normalize_advantages,
+            "ent_coef": config.entropy_coef,
+            # minippo's value loss is ½·mean((V − V^targ)²), SB3's mean((V − V^targ)²): half the coefficient is the
+            # same loss, hence the same gradient and the same global-norm clip
+            "vf_coef": config.value_coef / 2,
+            "max_grad_norm": config.max_grad_norm if config.grad_norm_clipping else float("inf"),
+            "target_kl": config.target_kl,  # None in both (the paper has no early stop); SB3's rule would differ
+            "policy_kwargs": {
+                "net_arch": {"pi": list(config.hidden_sizes), "vf": list(config.hidden_sizes)},
+                "activation_fn": "tanh",
+                "share_features_extractor": True,  # a flatten: no parameters to share; the two MLPs are separate
+                "ortho_init": config.orthogonal_init,  # gains √2 hidden, 0.01 policy output, 1 value output
+                "log_std_init": config.log_std_init,
+                "optimizer_kwargs": {"eps": config.adam_eps},
+            },
+            "device": "cpu",
+            "seed": config.seed,
+        },
+        "vec_normalize": {
+            "norm_obs": config.normalize_observations,
+            "norm_reward": config.scale_rewards,
+            "clip_obs": config.obs_clip,
+            "clip_reward": config.reward_clip,
+            "gamma": config.gamma,
+            "epsilon": 1e-8,
+        },
+        "total_timesteps": config.num_updates * batch,
+        "n_envs": config.num_envs,
+    }
+
+
+# the two Ray tasks (called like minippo.sweep.train_run, returning the same kind of result plus "eval", "version")
+
+
+def minippo_version() -> str:
+    import numpy
+
+    import minippo
+
+    return f"minippo {minippo.__version__}, numpy {numpy.__version__}"
+
+
+def minippo_run(config_dict: dict, name: str = "", board=None) -> dict:
+    """``minippo train`` as the sweep engine runs it, then minippo's own deterministic evaluation of the final
+    policy (``minippo eval RUN --episodes 10 --seed 0``)."""
+    from threadpoolctl import threadpool_limits
+
+    from minippo.evaluate import evaluate
+    from minippo.sweep import train_run
+
+    result = train_run(config_dict, name, board)
+    with threadpool_limits(1), tempfile.TemporaryDirectory(prefix="minippo-eval-") as scratch:
+        policy = Path(scratch) / "policy.npz"
+        policy.write_bytes(result["files"]["policy.npz"])
+        result["eval"] = evaluate(policy, EVAL_EPISODES, EVAL_SEED)
+    result["version"] = minippo_version()
+    return result
+
+
+def sb3_run(config_dict: dict, name: str = "", board=None) -> dict:
+    """Stable-Baselines3 PPO with ``sb3_settings(config)``, one torch thread, then the same deterministic evaluation
+    as minippo's. Its progress.csv has minippo's columns where SB3 has the number (one row per update)."""
+    import numpy as np
+    import stable_baselines3
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import VecNormalize
+    from threadpoolctl import threadpool_limits
+
+    torch.set_num_threads(1)
+    config = Config.from_dict(config_dict)
+    settings = sb3_settings(config)
+    kwargs = dict(settings["ppo"])
+    rate = kwargs["learning_rate"]
+    if rate["anneal"]:
+        kwargs["learning_rate"] = lambda progress_remaining: rate["initial"] * (progress_remaining + rate["plus"])
+    else:
+        kwargs["learning_rate"] = rate["initial"]
+    policy_kwargs = dict(kwargs["policy_kwargs"])
+    policy_kwargs["activation_fn"] = {"tanh": torch.nn.Tanh}[policy_kwargs["activation_fn"]]
+    kwargs["policy_kwargs"] = policy_kwargs
+    total = settings["total_timesteps"]
+    rows: list[dict] = []
+
+    class Progress(BaseCallback):
+        """One row per update, written once the update is done (when the next rollout starts, or at the end)."""
+
+        def __init__(self):
+            super().__init__()
+            self.started, self.pending, self.episodes = time.perf_counter(), None, 0
+
+        def _on_step(self) -> bool:
+            self.episodes += sum(1 for info in self.locals["infos"] if "episode" in info)  # Monitor's episode ends
+            return True
+
+        def _on_rollout_end(self) -> None:
+            returns = [info["r"] for info in self.model.ep_info_buffer]  # the last 100 episodes, original rewards
+            self.pending = {
+                "update": len(rows) + 1,
+                "step": self.model.num_timesteps,
+                "episodes": self.episodes,
+                "return_mean": float(np.mean(returns)) if returns else float("nan"),
+            }
+
+        def _on_rollout_start(self) -> None:
+            self.flush()
+
+        def flush(self) -> None:
+            if self.pending is None:
+                return
+            wall = time.perf_counter() - self.started
+            row = {**self.pending, "lr": self.model.policy.optimizer.param_groups[0]["lr"], "wall_s": wall}
+            row["steps_per_s"] = row["step"] / wall
+            rows.append(row)
+            self.pending = None
+            if board is not None:
+                board.report.remote(name, row["step"], total, row["return_mean"])
+
+    with threadpool_limits(1):
+        env = VecNormalize(
+            make_vec_env(config.env_id, n_envs=settings["n_envs"], seed=config.seed), **settings["vec_normalize"]
+        )
+        model = PPO("MlpPolicy", env, verbose=0, **kwargs)
+        progress = Progress()
+        model.learn(total_timesteps=total, callback=progress)
+        progress.flush()
+        episodes = sb3_evaluate(model, env, config.env_id, EVAL_EPISODES, EVAL_SEED)
+        env.close()
+    last = rows[-1]
+    columns = ["update", "step", "episodes", "return_mean", "lr", "steps_per_s", "wall_s"]
+    lines = [",".join(columns)] + [",".join(repr(row[key]) for key in columns) for row in rows]
+    described = {"library": "stable-baselines3", "env_id": config.env_id, "seed": config.seed, **settings}
+    described["ppo"]["learning_rate"] = (
+        f"{rate['initial']} * (progress_remaining + {rate['plus']:.6g})" if rate["anneal"] else rate["initial"]
+    )
+    node = ""
+    if "ray" in sys.modules:
+        import ray
+
+        if ray.is_initialized():
+            node = ray.get_runtime_context().get_node_id()[:12]
+    return {
+        "files": {
+            "config.json": (json.dumps(described, indent=2) + "\n").encode(),
+            "progress.csv": ("\n".join(lines) + "\n").encode(),
+        },
+        "last": last,
+        "eval": episodes,
+        "version": f"stable-baselines3 {stable_baselines3.__version__}, torch {torch.__version__}",
+        "node": node,
+        "host": socket.gethostname(),
+        "pid": os.getpid(),
+    }
+
+
+def sb3_evaluate(model, venv, env_id: str, episodes: int, seed: int) -> list[float]:
+    """minippo's evaluation for an SB3 model: ``episodes`` episodes reset with seeds seed, seed + 1, ..., the mean
+    action (clipped to the bounds by ``predict``), observations normalised with the training statistics frozen
+    (``training=False``), original rewards summed (``norm_reward=False``)."""
+    import gymnasium as gym
+    import numpy as np
+
+    venv.training, venv.norm_reward = False, False
+    env = gym.make(env_id, disable_env_checker=True)
+    returns = []
+    for episode in range(episodes):
+        obs, _ = env.reset(seed=seed + episode)
+        total, done = 0.0, False
+        while not done:
+            action, _ = model.predict(venv.normalize_obs(np.asarray(obs, dtype=np.float64)), deterministic=True)
+            obs, reward, terminated, truncated, _ = env.step(action)
+            total += float(reward)
+            done = terminated or truncated
+        returns.append(total)
+    env.close()
+    return returns
+
+
+TASK_FUNCTIONS = {"minippo": minippo_run, "sb3": sb3_run}
+
+
+# the sweep
+
+
+@dataclass
+class PeerRun(Run):
+    """A run of either library; its command is this runner's, for that one run."""
+
+    def command(self, out_dir) -> str:
+        labels, config = self.labels, self.config
+        argv = ["python", "benchmarks/peers.py", "--libraries", labels["library"], "--tasks", config.env_id]
+        argv += ["--seeds", str(config.seed), "--steps", str(config.total_steps)]
+        if str(out_dir) != records.relative(RUN_ROOT):
+            argv += ["--runs", str(out_dir)]
+        return records.shell_text(argv)
+
+
+def sweep_runs(tasks, seeds, steps, libraries=LIBRARIES) -> list[PeerRun]:
+    """Task by task, seed by seed, the libraries side by side (a campaign stopped halfway compares like with like)."""
+    runs = []
+    for env_id in tasks:
+        for seed in seeds:
+            for library in libraries:
+                config = Config(env_id=env_id, total_steps=steps, seed=seed)
+                labels = {"library": library, "task": env_id, "seed": seed}
+                runs.append(PeerRun(f"{library}-{env_id}-seed{seed}", config, labels, task=TASK_FUNCTIONS[library]))
+    return runs
+
+
+def mean(values) -> float:
+    values = [float(value) for value in values]
+    return sum(values) / len(values) if values else float("nan")
+
+
+class PeerSweep(Sweep):
+    """minippo sweep's engine with the peers record: the row needs the task's evaluation and library version, which
+    the engine's own sweep row does not carry, so ``finish`` keeps the result for ``record_row``."""
+
+    def __init__(self, runs, root, record_csv, args):
+        super().__init__(
+            runs,
+            root,
+            workers=args.workers,
+            address=args.address,
+            retries=args.retries,
+            quiet=args.quiet,
+            record=Record(Path(record_csv), FIELDS, KEY, self.record_row),
+            after_write=records.compact_progress,
+            command_out=records.relative(root),
+        )
+        self.commit = code_commit()
+        self.result: dict | None = None
+
+    def finish(self, run, result, error, attempts) -> None:
+        self.result = result
+        super().finish(run, result, error, attempts)
+
+    def record_row(self, run, row: dict) -> dict:
+        return peer_row(run, row, self.result)
+
+
+def peer_row(run, row: dict, result: dict) -> dict:
+    """A peers.csv row from the engine's sweep row and the task's result."""
+    return {
+        "library": run.labels["library"],
+        "version": result["version"],
+        "task": run.labels["task"],
+        "seed": run.labels["seed"],
+        "steps": int(row["steps"]),
+        "return_mean": round(float(row["return_mean"]), 2),
+        "eval_mean": round(mean(result["eval"]), 2),
+        "wall_s": round(float(row["wall_s"]), 1),
+        "commit": row["commit"],
+        "command": row["command"],
+    }
+
+
+def code_commit() -> str:
+    """The short commit, with "+dirty" when minippo/ or this file (which sets SB3 up) has uncommitted edits."""
+    try:
+        head = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], cwd=records.ROOT, capture_output=True, text=True, check=True
+        ).stdout.strip()
+        status = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no", "--", "minippo", "benchmarks/peers.py"],
+            cwd=records.ROOT,
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return head + ("+dirty" if status else "")
+
+
+def ship_by_value() -> None:
+    """Ray sends the task functions to its workers pickled. Run as a script they are in __main__ and go by value; when
+    this file is imported as ``peers`` (the tests), its module must go by value too: the workers cannot import it
+    (benchmarks/ is not a package, and on a cluster the file is only on this machine)."""
+    if __name__ == "__main__":
+        return
+    try:
+        from ray import cloudpickle
+    except ImportError:  # the engine says that Ray is missing
+        return
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])
+
+
+def check_tasks(tasks) -> None:
+    import gymnasium as gym
+
+    for env_id in tasks:
+        if env_id not in gym.registry:
+            records.fail(f"unknown task '{env_id}'")
+        env = gym.make(env_id, disable_env_checker=True)
+        continuous = isinstance(env.action_space, gym.spaces.Box)
+        env.close()
+        if not continuous:
+            records.fail(f"{env_id} has discrete actions; this comparison is set up for continuous control")
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--tasks", nargs="+", default=TASKS, metavar="TASK", help="Gymnasium ids (continuous actions)")
+    parser.add_argument("--seeds", nargs="+", type=int, default=SEEDS)
+    parser.add_argument("--steps", type=int, default=STEPS)
+    parser.add_argument("--libraries", nargs="+", default=LIBRARIES, choices=LIBRARIES)
+    parser.add_argument("--csv", default=str(CSV_PATH), help="where to append the records")
+    parser.add_argument("--runs", default=str(RUN_ROOT), help="the folder of run folders")
+    parser.add_argument("--list", action="store_true", help="show what is recorded and what is left, then stop")
+    records.add_sweep_options(parser)
+    args = parser.parse_args(argv)
+    if args.steps < 2048:
+        records.fail(f"--steps must be at least one horizon (2048), not {args.steps}")
+    if len(set(args.seeds)) != len(args.seeds) or len(set(args.tasks)) != len(args.tasks):
+        records.fail("a task or a seed is named twice")
+    runs = sweep_runs(args.tasks, args.seeds, args.steps, [name for name in LIBRARIES if name in args.libraries])
+    if args.list:
+        done = {tuple(row[k] for k in KEY): row for row in records.read_rows(args.csv)}
+        for run in runs:
+            row = done.get(run.key())
+            label = f"{run.labels['library']:<8} {run.labels['task']:<16} seed {run.labels['seed']}"
+            if row:
+                print(f"recorded  {label}  return {row['return_mean']:>9}  eval {row['eval_mean']:>9}")
+            else:
+                print(f"to do     {label}")
+        return 0
+    check_tasks(args.tasks)
+    if "sb3" in args.libraries and importlib.util.find_spec("stable_baselines3") is None:
+        records.fail(SB3_MISSING)
+    if args.workers is not None and args.workers < 1:
+        records.fail(f"--workers must be at least 1, not {args.workers}")
+    ship_by_value()
+    from minippo.errors import MinippoError
+
+    job = PeerSweep(runs, args.runs, args.csv, args)
+    try:
+        return 1 if job.run() else 0
+    except MinippoError as error:
+        records.fail(str(error))
+    except KeyboardInterrupt:
+        print(f"interrupted; {job.recorded} runs recorded; the same command continues", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,280 @@
+"""minippo beside Stable-Baselines3 (benchmarks/peers.py): the summary's statistics on hand-computed numbers, the
+record's rows, SB3's settings as translated from minippo's Config, and one real tiny run of each library through the
+sweep engine (skipped when Stable-Baselines3 or Ray is not installed)."""
+
+import importlib.util
+import math
+import os
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+import peers  # noqa: E402
+import records  # noqa: E402
+import summary  # noqa: E402
+
+from minippo.optimizer import linear_schedule  # noqa: E402
+from minippo.ppo import Config  # noqa: E402
+
+# the statistics
+
+
+def test_t_quantiles_match_the_tables():
+    # Student's t, 97.5% points (any printed table; scipy.stats.t.ppf(0.975, df) gives the same digits)
+    assert summary.t_quantile(0.975, 1) == pytest.approx(12.706204736, rel=1e-9)
+    assert summary.t_quantile(0.975, 4) == pytest.approx(2.776445105, rel=1e-9)
+    assert summary.t_quantile(0.975, 10) == pytest.approx(2.228138852, rel=1e-9)
+    assert summary.t_quantile(0.975, 1e7) == pytest.approx(1.959964, rel=1e-6)  # the normal's, as df → ∞
+    assert summary.t_quantile(0.025, 4) == pytest.approx(-2.776445105, rel=1e-9)
+    assert summary.t_cdf(0.0, 3.5) == pytest.approx(0.5)
+    assert summary.t_cdf(2.776445105, 4) == pytest.approx(0.975, abs=1e-9)
+
+
+def test_welch_interval_by_hand():
+    # Equal sizes and variances, where Welch's df is a whole number. a = 10, 12, 14: mean 12, s² = 4;
+    # b = 4, 6, 8: mean 6, s² = 4. se² = 4/3 + 4/3 = 8/3, se = 1.6329932. df = (8/3)² / (2 · (4/3)²/2) = 4.
+    # t(0.975, 4) = 2.7764451 (from the table), half-width 2.7764451 · 1.6329932 = 4.5339159: 6 ± 4.5339159.
+    interval = summary.welch_interval([10, 12, 14], [4, 6, 8])
+    assert interval["diff"] == 6 and interval["df"] == pytest.approx(4)
+    assert interval["se"] == pytest.approx(math.sqrt(8 / 3))
+    assert (interval["low"], interval["high"]) == pytest.approx((1.4660841, 10.5339159), abs=1e-7)
+    assert summary.standing(interval) == "ahead"
+
+    # Unequal sizes, a fractional df. a = 3, 4, 5: mean 4, s² = 1, s²/n = 1/3; b = 1, 2: mean 1.5, s² = 1/2,
+    # s²/n = 1/4. se² = 7/12, se = 0.7637626. df = (7/12)² / ((1/3)²/2 + (1/4)²/1) = (49/144) / (17/144) = 49/17
+    # = 2.8823529. t(0.975, 49/17) = 3.2572081 (scipy.stats.t.ppf(0.975, 49/17), computed once); half-width
+    # 3.2572081 · 0.7637626 = 2.4877338: 2.5 ± 2.4877338 = [0.0122662, 4.9877338], which just excludes 0
+    # (scipy.stats.ttest_ind(a, b, equal_var=False).confidence_interval() gives the same).
+    interval = summary.welch_interval([3, 4, 5], [1, 2])
+    assert interval["df"] == pytest.approx(49 / 17)
+    assert (interval["low"], interval["high"]) == pytest.approx((0.0122662, 4.9877338), abs=1e-7)
+    assert summary.standing(interval) == "ahead"
+    swapped = summary.welch_interval([1, 2], [3, 4, 5])
+    assert (swapped["low"], swapped["high"]) == pytest.approx((-4.9877338, -0.0122662), abs=1e-7)
+    assert summary.standing(swapped) == "behind"
+    assert summary.standing(summary.welch_interval([1, 2, 3], [2, 3, 4])) == "level"
+    with pytest.raises(ValueError):
+        summary.welch_interval([1.0], [1.0, 2.0])
+
+
+def peer_record(library, task, seed, train, evaluation, wall_s=600.0, steps=999_424):
+    return {
+        "library": library,
+        "version": f"{library} 1",
+        "task": task,
+        "seed": str(seed),
+        "steps": str(steps),
+        "return_mean": str(train),
+        "eval_mean": str(evaluation),
+        "wall_s": str(wall_s),
+        "commit": "abc1234",
+        "command": "python benchmarks/peers.py",
+    }
+
+
+def test_peers_table_and_sentences(tmp_path):
+    rows = [
+        *(peer_record("minippo", "Hopper-v5", seed, v, 2 * v, 120) for seed, v in zip((1, 2, 3), (3000, 4000, 5000))),
+        *(peer_record("sb3", "Hopper-v5", seed, v, 2 * v, 600) for seed, v in zip((1, 2), (1000, 2000))),
+        peer_record("minippo", "Walker2d-v5", 1, 3000, 3100),
+        peer_record("sb3", "Walker2d-v5", 1, 2000, 2100),
+    ]
+    stats = summary.peers_stats(rows)
+    assert list(stats) == [("Hopper-v5", 999_424), ("Walker2d-v5", 999_424)]  # the runner's task order
+    hopper = stats[("Hopper-v5", 999_424)]
+    mine = hopper["libraries"]["minippo"]["scores"]["return_mean"]
+    assert mine["mean"] == 4000 and mine["se"] == pytest.approx(1000 / math.sqrt(3))
+    assert hopper["libraries"]["sb3"]["minutes"] == 10
+    # the hand-computed interval above, ×1000 (train) and ×2000 (eval)
+    train = hopper["compared"]["return_mean"]
+    assert (train["low"], train["high"]) == pytest.approx((12.2662, 4987.7338), abs=1e-4)
+    assert hopper["compared"]["eval_mean"]["low"] == pytest.approx(24.5324, abs=1e-4)
+    assert stats[("Walker2d-v5", 999_424)]["compared"]["return_mean"] is None
+
+    lines = summary.peers_lines(rows)
+    table = [line for line in lines if line.startswith("| Hopper-v5")]
+    assert table[0] == (
+        "| Hopper-v5 | 999,424 | train | 4,000 ± 577 (n = 3) | 1,500 ± 500 (n = 2) | +2,500 [+12, +4,988] | ahead "
+        "| 2.0 / 10.0 |"
+    )
+    assert table[1].startswith("| Hopper-v5 | 999,424 | eval | 8,000 ± 1,155 (n = 3) | 3,000 ± 1,000 (n = 2) |")
+    walker = "| Walker2d-v5 | 999,424 | train | 3,000 (n = 1) | 2,000 (n = 1) | — | incomplete | 10.0 / 10.0 |"
+    assert walker in lines
+    text = "\n".join(lines)
+    assert "Hopper-v5, 999,424 steps (minippo 3 seeds, SB3 2 seeds): minippo is ahead of SB3 at equal steps" in text
+    assert "Walker2d-v5, 999,424 steps: incomplete (minippo 1 seed, SB3 1 seed;" in text
+
+    results = tmp_path / "results"
+    results.mkdir()
+    assert "No side-by-side runs are recorded yet" in summary.build(results, tmp_path / "runs")[0]
+    records.append_row(results / "peers.csv", peers.FIELDS, rows[0])
+    text = summary.build(results, tmp_path / "runs")[0]
+    assert (
+        "## Side by side with Stable-Baselines3" in text and "| Hopper-v5 | 999,424 | train | 3,000 (n = 1) |" in text
+    )
+
+
+# the runner: runs, rows, settings
+
+
+def test_runs_alternate_libraries_and_name_their_command():
+    runs = peers.sweep_runs(["Hopper-v5", "Walker2d-v5"], [1, 2], 1_000_000)
+    assert [run.name for run in runs[:4]] == [
+        "minippo-Hopper-v5-seed1",
+        "sb3-Hopper-v5-seed1",
+        "minippo-Hopper-v5-seed2",
+        "sb3-Hopper-v5-seed2",
+    ]
+    assert runs[1].labels == {"library": "sb3", "task": "Hopper-v5", "seed": 1} and runs[1].task is peers.sb3_run
+    assert runs[0].task is peers.minippo_run and runs[0].config == Config(env_id="Hopper-v5", seed=1)
+    assert runs[1].command("benchmarks/runs/peers") == (
+        "python benchmarks/peers.py --libraries sb3 --tasks Hopper-v5 --seeds 1 --steps 1000000"
+    )
+    assert runs[0].command("/tmp/elsewhere").endswith("--steps 1000000 --runs /tmp/elsewhere")
+
+
+def test_a_record_row_has_the_columns_in_order():
+    run = peers.sweep_runs(["Hopper-v5"], [3], 4096, ["sb3"])[0]
+    sweep_row = {"steps": 4096, "return_mean": "12.3456", "wall_s": 5.04, "commit": "abc", "command": "python x"}
+    result = {"eval": [10.0, 11.0, 12.5], "version": "stable-baselines3 2.9.2, torch 2.13.0+cpu"}
+    row = peers.peer_row(run, sweep_row, result)
+    assert (
+        list(row)
+        == peers.FIELDS
+        == [
+            "library",
+            "version",
+            "task",
+            "seed",
+            "steps",
+            "return_mean",
+            "eval_mean",
+            "wall_s",
+            "commit",
+            "command",
+        ]
+    )
+    assert row == {
+        "library": "sb3",
+        "version": "stable-baselines3 2.9.2, torch 2.13.0+cpu",
+        "task": "Hopper-v5",
+        "seed": 3,
+        "steps": 4096,
+        "return_mean": 12.35,
+        "eval_mean": 11.17,
+        "wall_s": 5.0,
+        "commit": "abc",
+        "command": "python x",
+    }
+
+
+def test_sb3_settings_are_minippos_defaults():
+    config = Config(env_id="Hopper-v5", seed=4)
+    settings = peers.sb3_settings(config)
+    ppo, normalize = settings["ppo"], settings["vec_normalize"]
+    assert (ppo["n_steps"], ppo["batch_size"], ppo["n_epochs"]) == (2048, 64, 10)
+    assert (ppo["gamma"], ppo["gae_lambda"], ppo["clip_range"], ppo["clip_range_vf"]) == (0.99, 0.95, 0.2, None)
+    assert (ppo["ent_coef"], ppo["vf_coef"], ppo["max_grad_norm"], ppo["seed"]) == (0.0, 0.25, 0.5, 4)
+    assert ppo["policy_kwargs"]["net_arch"] == {"pi": [64, 64], "vf": [64, 64]}
+    assert ppo["policy_kwargs"]["optimizer_kwargs"] == {"eps": 1e-5} and ppo["policy_kwargs"]["log_std_init"] == 0
+    assert normalize == {
+        "norm_obs": True,
+        "norm_reward": True,
+        "clip_obs": 10.0,
+        "clip_reward": 10.0,
+        "gamma": 0.99,
+        "epsilon": 1e-8,
+    }
+    assert settings["total_timesteps"] == 488 * 2048
+    # SB3 calls the schedule with the progress remaining after update k's rollout, 1 − k·2048/total
+    rate = ppo["learning_rate"]
+    for k in (1, 2, 244, 488):
+        progress_remaining = 1 - k * 2048 / settings["total_timesteps"]
+        sb3_rate = rate["initial"] * (progress_remaining + rate["plus"])
+        assert sb3_rate == pytest.approx(linear_schedule(3e-4, k, 488), rel=1e-12, abs=1e-15)
+
+
+def test_the_runner_refuses_what_it_cannot_run(capsys):
+    for argv, message in [
+        (["--tasks", "CartPole-v1"], "discrete actions"),
+        (["--tasks", "NoSuchTask-v0"], "unknown task"),
+        (["--steps", "100"], "at least one horizon"),
+        (["--seeds", "1", "1"], "named twice"),
+    ]:
+        with pytest.raises(SystemExit) as exit_info:
+            peers.main(argv)
+        assert exit_info.value.code == 2 and message in capsys.readouterr().err
+
+
+# one real tiny run of each library through the sweep engine
+
+
+@pytest.fixture
+def ray_here(monkeypatch):
+    """Ray on loopback without usage reports; its workers import this checkout's minippo."""
+    if importlib.util.find_spec("ray") is None:
+        pytest.skip("Ray is not installed (pip install -e '.[sweep]')")
+    monkeypatch.setenv("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
+    monkeypatch.setenv("RAY_USAGE_STATS_ENABLED", "0")
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+
+
+@pytest.mark.skipif(importlib.util.find_spec("stable_baselines3") is None, reason="stable-baselines3 not installed")
+def test_a_tiny_run_of_each_library_through_the_engine(tmp_path, ray_here):
+    record, runs = tmp_path / "peers.csv", tmp_path / "runs"
+    argv = ["--tasks", "Pendulum-v1", "--seeds", "1", "--steps", "4096", "--csv", str(record), "--runs", str(runs)]
+    assert peers.main([*argv, "--workers", "2", "--quiet"]) == 0
+    rows = records.read_rows(record)
+    assert [row["library"] for row in rows] in (["minippo", "sb3"], ["sb3", "minippo"])  # as they finish
+    for row in rows:
+        assert list(row) == peers.FIELDS
+        assert (row["task"], row["seed"], row["steps"]) == ("Pendulum-v1", "1", "4096")
+        # Pendulum's returns lie between about −1,900 and 0 per 200-step episode
+        assert -2000 < float(row["return_mean"]) < 0 and -2000 < float(row["eval_mean"]) < 0
+        assert float(row["wall_s"]) > 0 and row["commit"] == peers.code_commit()
+        assert row["command"] == (
+            f"python benchmarks/peers.py --libraries {row['library']} --tasks Pendulum-v1 --seeds 1 --steps 4096 "
+            f"--runs {records.relative(runs)}"
+        )
+    versions = {row["library"]: row["version"] for row in rows}
+    assert versions["minippo"].startswith("minippo ") and versions["sb3"].startswith("stable-baselines3 ")
+    # both ran two updates with the same step sizes, minippo's linear annealing
+    mine = records.read_rows(runs / "minippo-Pendulum-v1-seed1" / "progress.csv")
+    theirs = records.read_rows(runs / "sb3-Pendulum-v1-seed1" / "progress.csv")
+    assert [row["step"] for row in mine] == [row["step"] for row in theirs] == ["2048", "4096"]
+    assert [float(row["lr"]) for row in theirs] == pytest.approx([float(row["lr"]) for row in mine]) == [3e-4, 1.5e-4]
+    assert (runs / "sb3-Pendulum-v1-seed1" / "config.json").exists()
+    assert (runs / "minippo-Pendulum-v1-seed1" / "policy.npz").exists()
+    log = records.read_rows(runs / "sweep.csv")
+    assert sorted((row["library"], row["status"]) for row in log) == [("minippo", "ok"), ("sb3", "ok")]
+    # recorded runs are skipped: the same command does nothing more
+    assert peers.main([*argv, "--quiet"]) == 0 and len(records.read_rows(record)) == 2
+
+
+def test_the_list_shows_recorded_and_left_runs(tmp_path, capsys):
+    record = tmp_path / "peers.csv"
+    records.append_row(record, peers.FIELDS, peer_record("sb3", "Hopper-v5", 1, 1234.5, 1500))
+    assert peers.main(["--tasks", "Hopper-v5", "--seeds", "1", "--csv", str(record), "--list"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("to do     minippo  Hopper-v5") and out[1].startswith("recorded  sb3      Hopper-v5")
+
+
+def test_a_missing_sb3_is_named_with_its_install_command(monkeypatch, capsys):
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name: None if name == "stable_baselines3" else real(name))
+    with pytest.raises(SystemExit):
+        peers.main(["--tasks", "Pendulum-v1", "--libraries", "sb3"])
+    assert "pip install torch==2.13.0" in capsys.readouterr().err
+
+
+def test_the_peer_sweep_logs_and_records_its_own_columns(tmp_path):
+    args = SimpleNamespace(workers=None, address=None, retries=0, quiet=True)  # as records.add_sweep_options gives
+    job = peers.PeerSweep(peers.sweep_runs(["Hopper-v5"], [1], 4096), tmp_path / "runs", tmp_path / "peers.csv", args)
+    assert job.fields[:4] == ["library", "task", "seed", "steps"] and job.record.fields == peers.FIELDS
+    assert job.csv_path == tmp_path / "runs" / "sweep.csv" and job.commit == peers.code_commit()
