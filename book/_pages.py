@@ -14,6 +14,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from minippo import corridor  # noqa: E402
 from minippo.plotting import INK, ORANGE, SAGE  # noqa: E402
 from minippo.ppo import Trainer, compute_advantages, flatten, update_minibatch  # noqa: E402
 
@@ -21,6 +22,8 @@ SLATE = "#4f6d8f"
 plt.rcParams.update(
     {
         "figure.dpi": 110,
+        # one-column figures are about 5.8 inches wide: 11-point type stays legible when a phone shrinks them to 360 px
+        "font.size": 11,
         "axes.grid": True,
         "grid.alpha": 0.3,
         "axes.spines.top": False,
@@ -36,6 +39,7 @@ __all__ = [
     "PPO_CARTPOLE",
     "VANILLA_CARTPOLE",
     "central_differences",
+    "corridor_rounds",
     "epochs_on_one_batch",
     "one_batch",
 ]
@@ -111,3 +115,22 @@ def epochs_on_one_batch(trainer, data, epochs, measure):
         out, _, _ = agent.forward(data["obs"])
         measured.append(measure(agent.distribution(out)))
     return measured
+
+
+def corridor_rounds(settings, ticks, changes=None):
+    """Plays the corridor explorer's math (``minippo.corridor``, which the explorer on the page runs step for step)
+    and sums the run up by round, so that a page can state what the reader will see when playing it.
+
+    Returns ``{round: {"records", "max_kl", "broken_at", "end"}}``: the round's records, its largest KL, the first
+    epoch at which the light read "broken" (None if it held) and its last record. ``settings`` and ``changes`` are as
+    for ``corridor.run``.
+    """
+    rounds = {}
+    for record in corridor.run(settings, ticks, changes):
+        summary = rounds.setdefault(record["round"], {"records": [], "max_kl": 0.0, "broken_at": None})
+        summary["records"].append(record)
+        summary["max_kl"] = max(summary["max_kl"], record["kl"])
+        if not record["held"] and summary["broken_at"] is None:
+            summary["broken_at"] = record["epoch"]
+        summary["end"] = record
+    return rounds

@@ -375,3 +375,56 @@ def test_huge_step_preset_stays_bounded(reader):
     unclipped = cd.run({"preset": "hugestep", "objective": "cpi"}, ticks=ticks)
     assert peak < 0.25 * max(r["kl"] for r in unclipped)
     assert screen["return"] > 0.8 * screen["optimal"]
+
+
+def test_a_slider_drag_is_one_line_of_the_log(reader):
+    """Dragging ε through many values moves the band at every value but logs the change once, when the drag ends."""
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    reader.preset("clip")
+    before = reader.log()
+    slider = reader.find("input[data-setting='epsilon']")
+    band = reader.find("rect.ce-band")
+    # note the band's lower edge at every value the slider passes through
+    reader.driver.execute_script(
+        "const [slider, band] = arguments; window.bandLows = [];"
+        "slider.addEventListener('input', () => window.bandLows.push(band.getAttribute('data-low')));",
+        slider,
+        band,
+    )
+    drag = ActionChains(reader.driver).click_and_hold(slider)
+    for _ in range(6):
+        drag.move_by_offset(-12, 0)
+    drag.release().perform()
+    lows = reader.driver.execute_script("return window.bandLows;")
+    assert len(set(lows)) >= 3, lows  # the band followed the drag
+    added = reader.log()[: len(reader.log()) - len(before)]
+    assert len([line for line in added if "ε →" in line]) == 1, added
+    assert f"band [{band.get_attribute('data-low')}," in added[0]  # the line names where the drag ended
+
+
+def test_band_labels_do_not_overlap_at_the_narrowest_band(reader):
+    from selenium.webdriver.common.keys import Keys
+
+    reader.preset("clip")
+    reader.find("input[data-setting='epsilon']").send_keys(Keys.HOME)  # ε = 0.05
+    low, high = reader.driver.execute_script(
+        "return Array.from(arguments[0].querySelectorAll('text.ce-band-label'), (t) => {"
+        "const box = t.getBoundingClientRect(); return [box.left, box.right, t.textContent];});",
+        reader.root,
+    )
+    assert (low[2], high[2]) == ("0.95", "1.05")
+    assert low[1] <= high[0], (low, high)
+
+
+def test_the_kl_penalty_chapter_shows_beta_and_logs_its_changes(browser, site):
+    """Chapter 9 embeds the explorer on L^KLPEN: β is in the status line, and eq. 8's rule acts at a round's end."""
+    page = Reader(browser, site.rsplit("/", 1)[0] + "/09-kl-penalty.html")
+    assert page.find("input[type='radio'][value='klpen']").get_attribute("checked")
+    beta = page.find(".ce-stat-beta")
+    assert beta.is_displayed() and page.stat("beta") == "1"
+    screen = page.step_until(lambda s: s["round"] == 2)
+    expected = cd.run({"preset": "clip", "objective": "klpen"}, ticks=11)[-1]
+    assert screen["epoch"] == "1/10" and page.stat("beta") == f"{expected['beta']:g}"
+    assert any("β doubles to 2" in line for line in page.log()), page.log()
+    assert not severe_messages(browser)
