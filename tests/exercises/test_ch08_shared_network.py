@@ -15,8 +15,8 @@ pytestmark = pytest.mark.timeout(10)
 
 # (V, V_old, V^targ, ε) for one sample, and what happens there
 VALUE_CASES = [
-    (0.5, 0.0, 1.0, 0.2, "V moved 0.5 > ε toward the target: the clipped error is larger, and V^clip is flat there"),
     (-0.5, 0.0, 1.0, 0.2, "V moved 0.5 > ε away from the target: the unclipped error is larger"),
+    (0.5, 0.0, 1.0, 0.2, "V moved 0.5 > ε toward the target: the clipped error is larger, and V^clip is flat there"),
     (0.1, 0.0, 1.0, 0.2, "V moved 0.1 < ε: V^clip = V, the two errors are equal"),
     (2.0, 1.0, 0.0, 0.4, "V moved 1 > ε away from the target: the unclipped error is larger"),
     (0.3, 1.0, 0.0, 0.4, "V moved 0.7 > ε toward the target: the clipped error is larger, and V^clip is flat there"),
@@ -36,6 +36,8 @@ def test_clipped_value_loss_one_sample(student, v, v_old, target, epsilon, case)
         "ε fixed at 0.2 (the epsilon argument ignored)": None
         if epsilon == 0.2
         else 0.5 * max(error**2, (v_old + min(max(v - v_old, -0.2), 0.2) - target) ** 2),
+        "the plain loss ½ (V − V^targ)², as if nothing were clipped: is V clipped around V^targ instead of around "
+        "V_old (V^clip = V_old + clip(V − V_old, −ε, ε))": 0.5 * error**2,
     }
     expect_number(loss, expected_loss, "clipped_value_loss", f"the loss for {sample}", case, alternatives=loss_mistakes)
     check_array(grad, "clipped_value_loss", (1,), f"the gradient for {sample}")
