@@ -124,14 +124,16 @@ def test_kl_penalty_objective_value_and_gradients(student, rng, n, beta):
 
 @pytest.mark.parametrize(
     "kl, expected, why",
-    [
+    [  # well inside each of the three ranges first, then just beside the thresholds, then exactly on them
         (0.5, 0.5, "d < d_targ/1.5: β is halved"),
-        (1.99, 0.5, "d just below d_targ/1.5: β is halved"),
-        (2.0, 1.0, "d exactly d_targ/1.5: β stays"),
-        (3.0, 1.0, "d = d_targ: β stays"),
-        (4.5, 1.0, "d exactly 1.5·d_targ: β stays"),
-        (4.51, 2.0, "d just above 1.5·d_targ: β is doubled"),
         (30.0, 2.0, "d > 1.5·d_targ: β is doubled, once"),
+        (3.0, 1.0, "d = d_targ: β stays"),
+        (2.5, 1.0, "d_targ/1.5 < d < d_targ: β stays; it is halved only below d_targ/1.5"),
+        (3.9, 1.0, "d_targ < d < 1.5·d_targ: β stays; it is doubled only above 1.5·d_targ"),
+        (1.99, 0.5, "d just below d_targ/1.5: β is halved"),
+        (4.51, 2.0, "d just above 1.5·d_targ: β is doubled"),
+        (2.0, 1.0, "d exactly d_targ/1.5: β stays"),
+        (4.5, 1.0, "d exactly 1.5·d_targ: β stays"),
     ],
 )
 def test_adaptive_beta_rule(student, kl, expected, why):
