@@ -52,8 +52,13 @@ def test_tanh_backward_matches_finite_differences(student, rng):
     h = np.tanh(z)
     grad_z = call_checking_inputs(student.tanh_backward, "tanh_backward", h, grad_h)
     check_array(grad_z, "tanh_backward", (3, 5))
+    assert not np.allclose(grad_z, grad_h * (1 - np.tanh(h) ** 2)), (
+        "tanh_backward: the result is ∂L/∂h · (1 − tanh(h)²), but h is already tanh(z): ∂L/∂z = ∂L/∂h · (1 − h²)"
+    )
     expected = numerical_gradient(lambda: float(np.sum(grad_h * np.tanh(z))), z)
-    check_close(grad_z, expected, "tanh_backward", "∂L/∂z (checked by finite differences)")
+    check_close(
+        grad_z, expected, "tanh_backward", "∂L/∂z (checked by finite differences)", where={"h": h, "∂L/∂h": grad_h}
+    )
 
 
 def test_tanh_backward_is_zero_where_tanh_is_flat(student):

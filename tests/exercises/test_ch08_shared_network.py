@@ -177,6 +177,9 @@ def test_clip_vf_s_objective_value_and_gradients(student, objective_batch, c1, c
         "the value loss added (+c1 L^VF); it enters with a minus": reference_objective(*args[:7], -c1, c2),
         "the entropy bonus subtracted (−c2 S); it enters with a plus": reference_objective(*args[:7], c1, -c2),
         "c1 and c2 swapped": reference_objective(*args[:7], c2, c1),
+        "the value loss without its ½": reference_objective(*args[:7], 2 * c1, c2),
+        "the entropy summed over the batch, not averaged": reference_objective(*args[:7], c1, c2 * len(logp)),
+        "the value error summed over the batch, not averaged": reference_objective(*args[:7], c1 * len(logp), c2),
     }
     expect_number(
         value,
