@@ -252,7 +252,8 @@ def check_array(value, name: str, shape: tuple, what: str = "the result") -> np.
     assert value.dtype == np.float64, (
         f"{name}: {what} should be a float64 array (the contract's dtype), not {value.dtype}"
         + (" (an integer or boolean array: start from np.zeros(shape) or cast to float)" if value.dtype.kind in "biu"
-           else " (np.zeros_like(x) copies x's dtype; build the result with dtype=np.float64)")
+           else " (arithmetic on float32 inputs stays float32, and np.zeros_like(x) copies x's dtype: convert the "
+           "inputs with np.asarray(x, dtype=np.float64), or build the result with dtype=np.float64)")
     )  # fmt: skip
     assert np.all(np.isfinite(value)), f"{name}: {what} holds NaN or infinite numbers: {_short(value)}"
     return value
@@ -309,10 +310,14 @@ def expect_number(
     )
 
 
-def check_close(actual, expected, name: str, what: str, rtol: float = 1e-6, atol: float = 1e-9, where=None) -> None:
+def check_close(
+    actual, expected, name: str, what: str, rtol: float = 1e-6, atol: float = 1e-9, where=None, n: int | None = None
+) -> None:
     """``actual`` equals ``expected`` to the tolerance, or the test fails showing the worst entry: its index, the inputs
     there (``where``: a dict of name -> array of the result's shape or a number, or a function of the index giving
-    text), and as many digits as it takes to see the difference."""
+    text), and as many digits as it takes to see the difference. ``n``: the batch size, where the result sums over a
+    batch without having one row per sample (a bias's or a shared log σ's gradient), so that a mean in place of the
+    sum is named (otherwise the result's first dimension counts as n)."""
     dtype = getattr(actual, "dtype", None)
     actual, expected = np.asarray(actual, dtype=np.float64), np.asarray(expected, dtype=np.float64)
     assert actual.shape == expected.shape, f"{name}: {what} should have shape {expected.shape}, not {actual.shape}"
@@ -336,11 +341,11 @@ def check_close(actual, expected, name: str, what: str, rtol: float = 1e-6, atol
         detail += ")"
     raise AssertionError(
         f"{name}: {what} is wrong{at}{context}: got {_number(got, digits)}, expected {_number(want, digits)}{detail}"
-        + _pattern(actual, expected)
+        + _pattern(actual, expected, n)
     )
 
 
-def _pattern(actual: np.ndarray, expected: np.ndarray) -> str:
+def _pattern(actual: np.ndarray, expected: np.ndarray, n: int | None = None) -> str:
     """A hint when the whole result is off by one factor: the sign, n (a sum for a mean), 2 or ½."""
     if actual.size < 2:
         got, want = float(actual.reshape(-1)[0]), float(expected.reshape(-1)[0])
@@ -362,10 +367,11 @@ def _pattern(actual: np.ndarray, expected: np.ndarray) -> str:
     factor = float(np.median(factors))
     if not np.allclose(factors, factor, rtol=1e-4) or abs(factor - 1) < 1e-6 or abs(factor) < 1e-9:
         return ""
+    n = actual.shape[0] if n is None else n
     for value, words in [
         (-1.0, "the sign is flipped everywhere"),
-        (float(actual.shape[0]), f"{actual.shape[0]} = n times too large everywhere: a sum where the mean belongs?"),
-        (1 / actual.shape[0], f"n = {actual.shape[0]} times too small everywhere: a mean where the sum belongs?"),
+        (float(n), f"{n} = n times too large everywhere: a sum where the mean belongs?"),
+        (1 / n, f"n = {n} times too small everywhere: a mean where the sum belongs?"),
         (2.0, "twice the expected everywhere: a factor ½ or 2?"),
         (0.5, "half the expected everywhere: a factor ½ or 2?"),
     ]:

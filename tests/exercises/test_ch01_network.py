@@ -42,8 +42,8 @@ def test_linear_backward_matches_finite_differences(student, rng, n):
     check_array(grad_W, "linear_backward", (3, 4), "grad_W")
     check_array(grad_b, "linear_backward", (4,), "grad_b (one entry per output, summed over the batch)")
     check_close(grad_x, numerical_gradient(loss, x), "linear_backward", "grad_x (checked by finite differences)")
-    check_close(grad_W, numerical_gradient(loss, W), "linear_backward", "grad_W (checked by finite differences)")
-    check_close(grad_b, numerical_gradient(loss, b), "linear_backward", "grad_b (checked by finite differences)")
+    check_close(grad_W, numerical_gradient(loss, W), "linear_backward", "grad_W (checked by finite differences)", n=n)
+    check_close(grad_b, numerical_gradient(loss, b), "linear_backward", "grad_b (checked by finite differences)", n=n)
 
 
 def test_tanh_backward_matches_finite_differences(student, rng):
@@ -52,8 +52,13 @@ def test_tanh_backward_matches_finite_differences(student, rng):
     h = np.tanh(z)
     grad_z = call_checking_inputs(student.tanh_backward, "tanh_backward", h, grad_h)
     check_array(grad_z, "tanh_backward", (3, 5))
+    assert not np.allclose(grad_z, grad_h * (1 - np.tanh(h) ** 2)), (
+        "tanh_backward: the result is ∂L/∂h · (1 − tanh(h)²), but h is already tanh(z): ∂L/∂z = ∂L/∂h · (1 − h²)"
+    )
     expected = numerical_gradient(lambda: float(np.sum(grad_h * np.tanh(z))), z)
-    check_close(grad_z, expected, "tanh_backward", "∂L/∂z (checked by finite differences)")
+    check_close(
+        grad_z, expected, "tanh_backward", "∂L/∂z (checked by finite differences)", where={"h": h, "∂L/∂h": grad_h}
+    )
 
 
 def test_tanh_backward_is_zero_where_tanh_is_flat(student):
@@ -103,8 +108,8 @@ def test_mlp_backward_matches_finite_differences(student, rng, sizes):
     for i, ((W, b), (grad_W, grad_b)) in enumerate(zip(layers, grads)):
         check_array(grad_W, "mlp_backward", W.shape, f"∂L/∂W of layer {i + 1}")
         check_array(grad_b, "mlp_backward", b.shape, f"∂L/∂b of layer {i + 1}")
-        check_close(grad_W, numerical_gradient(loss, W), "mlp_backward", f"∂L/∂W of layer {i + 1}", 1e-5, 1e-7)
-        check_close(grad_b, numerical_gradient(loss, b), "mlp_backward", f"∂L/∂b of layer {i + 1}", 1e-5, 1e-7)
+        check_close(grad_W, numerical_gradient(loss, W), "mlp_backward", f"∂L/∂W of layer {i + 1}", 1e-5, 1e-7, n=6)
+        check_close(grad_b, numerical_gradient(loss, b), "mlp_backward", f"∂L/∂b of layer {i + 1}", 1e-5, 1e-7, n=6)
     check_array(grad_x, "mlp_backward", x.shape, "∂L/∂x")
     check_close(grad_x, numerical_gradient(loss, x), "mlp_backward", "∂L/∂x", 1e-5, 1e-7)
 

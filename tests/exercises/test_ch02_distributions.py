@@ -190,7 +190,14 @@ def test_gaussian_log_prob_matches_the_density(student, gaussian):
     mean, log_std, actions = gaussian
     logp = call_checking_inputs(student.gaussian_log_prob, "gaussian_log_prob", mean, log_std, actions)
     check_array(logp, "gaussian_log_prob", (5,))
-    check_close(logp, reference_gaussian_log_prob(mean, log_std, actions), "gaussian_log_prob", "log π(a|s)")
+    expected = reference_gaussian_log_prob(mean, log_std, actions)
+    offset = logp - expected
+    assert not (np.allclose(offset, offset[0], rtol=0, atol=1e-9) and abs(offset[0]) > 1e-6), (
+        f"gaussian_log_prob: log π(a|s) is off by the same {offset[0]:.6g} in every row (d = 3, Σ log σ_i = "
+        f"{log_std.sum():.4g}): one of the terms that do not depend on a, −Σ log σ_i or −(d/2) log 2π = "
+        f"{-1.5 * np.log(2 * np.pi):.6g}, is wrong"
+    )
+    check_close(logp, expected, "gaussian_log_prob", "log π(a|s)")
     one = student.gaussian_log_prob(mean[:1], log_std, actions[:1])
     check_array(one, "gaussian_log_prob", (1,), "the result for a batch of one")
 
@@ -225,7 +232,8 @@ def test_gaussian_log_prob_backward_matches_finite_differences(student, gaussian
         return float(grad_logp @ reference_gaussian_log_prob(mean, log_std, actions))
 
     check_close(grad_mean, numerical_gradient(loss, mean), "gaussian_log_prob_backward", "∂L/∂μ", 1e-5, 1e-7)
-    check_close(grad_log_std, numerical_gradient(loss, log_std), "gaussian_log_prob_backward", "∂L/∂ log σ", 1e-5, 1e-7)
+    numeric = numerical_gradient(loss, log_std)
+    check_close(grad_log_std, numeric, "gaussian_log_prob_backward", "∂L/∂ log σ", 1e-5, 1e-7, n=5)
 
 
 def test_gaussian_entropy_matches_monte_carlo(student, rng):
@@ -253,4 +261,4 @@ def test_gaussian_entropy_backward_matches_finite_differences(student, rng):
         return float(np.sum(grad_entropy) * np.sum(log_std + 0.5 * np.log(2 * np.pi * np.e)))
 
     check_close(grad_mean, np.zeros((4, 2)), "gaussian_entropy_backward", "∂L/∂μ (the entropy does not depend on μ)")
-    check_close(grad_log_std, numerical_gradient(loss, log_std), "gaussian_entropy_backward", "∂L/∂ log σ")
+    check_close(grad_log_std, numerical_gradient(loss, log_std), "gaussian_entropy_backward", "∂L/∂ log σ", n=4)

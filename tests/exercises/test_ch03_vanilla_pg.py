@@ -45,6 +45,30 @@ def test_normalize_advantages_gives_mean_zero_and_std_one(student, rng):
     assert np.all(np.argsort(normalized) == np.argsort(advantages)), "normalize_advantages: the order must not change"
 
 
+def test_normalize_advantages_with_a_tiny_spread(student, rng):
+    # std Â = 1e-4: (Â − mean)/(std + 1e-8) is still about ±1, while √(var + 1e-8) would shrink it by 1/√2
+    advantages = rng.normal(size=6)
+    advantages = 2.0 + 1e-4 * (advantages - advantages.mean()) / advantages.std()
+    normalized = check_array(student.normalize_advantages(advantages), "normalize_advantages", (6,))
+    centred = advantages - advantages.mean()
+    expected = centred / (advantages.std() + 1e-8)
+    if np.allclose(normalized, expected, rtol=1e-3, atol=1e-9):  # a guard against std = 0 in place of 1e-8 passes
+        return
+    in_root = centred / np.sqrt(advantages.var() + 1e-8)
+    hint = (
+        ": the 1e-8 is added to the variance inside the square root, √(var + 1e-8); the contract adds it to the "
+        "standard deviation, std + 1e-8, which matters only when the spread is this small"
+        if np.allclose(normalized, in_root, rtol=1e-3)
+        else ""
+    )
+    worst = int(np.argmax(np.abs(normalized - expected)))
+    raise AssertionError(
+        f"normalize_advantages: for advantages with a tiny spread (std Â = 1e-4) the result should be "
+        f"(Â − mean Â)/(std Â + 1e-8), about ±1, but at index {worst} it is {normalized[worst]:.6g}, not "
+        f"{expected[worst]:.6g}{hint}"
+    )
+
+
 def test_normalize_advantages_ignores_shift_and_scale(student, rng):
     advantages = rng.normal(size=8)
     check_close(

@@ -23,7 +23,20 @@ def test_importance_ratio_is_the_probability_ratio(student, batch):
     logp, logp_old, _, _ = batch
     ratio = call_checking_inputs(student.importance_ratio, "importance_ratio", logp, logp_old)
     check_array(ratio, "importance_ratio", (10,))
-    check_close(ratio, np.exp(logp) / np.exp(logp_old), "importance_ratio", "r = π_θ / π_θold")
+    for mistake, value in [
+        ("π_θold / π_θ, the inverse (log π and log π_old swapped?)", np.exp(logp_old - logp)),
+        ("1 + (log π − log π_old), the first-order approximation of exp", 1.0 + (logp - logp_old)),
+    ]:
+        assert not np.allclose(ratio, value, rtol=1e-6), (
+            f"importance_ratio: r = π_θ / π_θold = exp(log π − log π_old), but the result is {mistake}"
+        )
+    check_close(
+        ratio,
+        np.exp(logp) / np.exp(logp_old),
+        "importance_ratio",
+        "r = π_θ / π_θold",
+        where={"log π − log π_old": logp - logp_old},
+    )
 
 
 def test_importance_ratio_with_very_negative_log_probs(student):

@@ -44,8 +44,9 @@ SINGLE = [
     (0.72, -1.0, 0.3),
 ]
 
-# (r, ε) for the clip fraction of one sample: plain cases first, then the windows
-FRACTION_CASES = [(1.5, 0.2), (0.5, 0.2), (1.0, 0.2), (1.15, 0.1), (1.25, 0.3)] + [
+# (r, ε) for the clip fraction of one sample: plain cases first, then r = 0.83, inside the band although 1/r is not,
+# then the windows
+FRACTION_CASES = [(1.5, 0.2), (0.5, 0.2), (1.0, 0.2), (1.15, 0.1), (1.25, 0.3), (0.83, 0.2)] + [
     (1.21, 0.2),
     (0.81, 0.2),
     (1.103, 0.1),
@@ -96,9 +97,15 @@ def test_clipped_surrogate_one_sample(student, ratio, advantage, epsilon):
 def test_clip_fraction_of_one_sample(student, ratio, epsilon):
     fraction = check_scalar(student.clip_fraction(np.log([ratio]), np.zeros(1), epsilon), "clip_fraction")
     expected = float(abs(ratio - 1) > epsilon)
+    mistakes = {
+        "r computed as π_old/π (log π and log π_old swapped)": float(abs(1 / ratio - 1) > epsilon),
+        "a band on |log r|": float(abs(np.log(ratio)) > epsilon),
+    }
+    named = [words for words, value in mistakes.items() if value == fraction]
     assert fraction == expected, (
         f"clip_fraction: for one sample with r = {ratio} and ε = {epsilon}, the fraction should be {expected:g}, not "
         f"{fraction:.6g} (r is {where_is_ratio(ratio, epsilon)})"
+        + (": " + " Or ".join(f"{w}?" for w in named) if named else "")
     )
 
 
@@ -115,6 +122,27 @@ def test_clip_fraction_extremes(student):
         1.0,
         "clip_fraction",
         "the fraction when every ratio is far outside the band on either side (a fraction of the batch, in [0, 1])",
+    )
+
+
+def exact_log_ratio(ratio: float) -> float:
+    """A log-ratio x with np.exp(x) == ratio exactly, so that |r − 1| = ε holds exactly in floating point."""
+    x = float(np.log(ratio))
+    for _ in range(64):
+        if np.exp(x) == ratio:
+            return x
+        x = float(np.nextafter(x, np.inf if np.exp(x) < ratio else -np.inf))
+    raise RuntimeError(f"no float x has exp(x) == {ratio}")
+
+
+def test_clip_fraction_at_the_edges_of_the_band(student):
+    # ε = 0.25 and r = 1.25 or 0.75 exactly: |r − 1| = ε is on the edge, not outside (|r − 1| > ε)
+    logp = np.array([exact_log_ratio(1.25), exact_log_ratio(0.75), np.log(1.5), 0.0])
+    fraction = check_scalar(student.clip_fraction(logp, np.zeros(4), 0.25), "clip_fraction")
+    assert fraction == 0.25, (
+        f"clip_fraction: for r = 1.25, 0.75, 1.5 and 1 with ε = 0.25 the fraction should be 0.25 (only r = 1.5 is "
+        f"outside; r = 1.25 and 0.75 lie exactly on the edges, |r − 1| = ε, which is not > ε), not {fraction:.6g}"
+        + (": |r − 1| ≥ ε where the contract says > ε?" if fraction == 0.75 else "")
     )
 
 

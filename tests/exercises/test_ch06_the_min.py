@@ -87,6 +87,14 @@ def test_clip_objective_one_sample(student, ratio, advantage, epsilon, case):
         else min(ratio, clipped) * advantage,
         "the clipped term alone (no min with r Â)": clipped * advantage,
         "min(r, clip(r)) Â: the min taken over the ratios, before multiplying by Â": min(ratio, clipped) * advantage,
+        "the log-ratio clipped to ±ε, a band (e^−ε, e^ε): clip r itself to (1 − ε, 1 + ε)": min(
+            ratio * advantage, min(max(ratio, np.exp(-epsilon)), np.exp(epsilon)) * advantage
+        ),
+        "np.clip(r Â, (1 − ε) Â, (1 + ε) Â): with Â < 0 those bounds are upside down; clip r, then multiply by Â": min(
+            ratio * advantage, min(max(ratio * advantage, (1 - epsilon) * advantage), (1 + epsilon) * advantage)
+        )
+        if advantage < 0
+        else None,
     }
     expect_number(value, per_sample_min(ratio, advantage, epsilon), "clip_objective", f"the value for {sample}", place,
                   alternatives=value_mistakes)  # fmt: skip

@@ -128,6 +128,24 @@ def test_td_residuals_of_a_short_batch(student):
     )
 
 
+def test_td_residuals_take_the_next_value_from_next_values(student):
+    # step 1 was truncated: next_values[1] = 4 is V of its episode's final observation, while values[2] = 1.5 is V of
+    # the next episode's first state; δ_1 = 1 + 0.5·4 − 1 = 2
+    deltas = student.td_residuals(
+        np.ones(3), np.array([0.5, 1.0, 1.5]), np.array([1.0, 4.0, 2.0]), np.zeros(3, bool), 0.5
+    )
+    check_array(deltas, "td_residuals", (3,), "δ for a batch of three steps")
+    check_close(
+        deltas,
+        [1.0, 2.0, 0.5],
+        "td_residuals",
+        "δ_t = r_t + γ next_values[t] − V(s_t), γ = 0.5, where step 1 was cut by a time limit (next_values[1] = 4 is V "
+        "of that episode's final observation; values[2] = 1.5 belongs to the next episode, so V(s_{t+1}) is "
+        "next_values[t], not values[t + 1])",
+        where=lambda i: f"step {i[0]}: next_values[{i[0]}] = {[1.0, 4.0, 2.0][i[0]]:g}",
+    )
+
+
 def test_a_step_both_terminated_and_truncated_counts_as_terminated(student):
     terminated, truncated = np.array([False, True, False]), np.array([False, True, False])
     rewards, next_values = np.ones(3), np.array([0.0, 1e6, 4.0])
@@ -162,6 +180,25 @@ def test_gae_of_one_short_episode(student):
         "gae",
         "Â for one episode of three steps, γ = 0.9, λ = 0.5 (Â_t = δ_t + γλ Â_{t+1}, so the decay is γλ = 0.45)",
         where=describe_step(no, no),
+    )
+
+
+@pytest.mark.parametrize("how", ["terminated", "truncated"])
+def test_gae_stops_at_an_episode_end(student, how):
+    # step 1 ends its episode; δ = (1, 1, 2) after a termination (its next value 1e6 unused), (1, 3, 2) after a
+    # truncation (bootstrapped from V = 4 of the final observation); with γλ = 0.5, Â_1 = δ_1 and Â_0 = δ_0 + 0.5 Â_1
+    flags = np.array([False, True, False])
+    terminated, truncated = (flags, np.zeros(3, bool)) if how == "terminated" else (np.zeros(3, bool), flags)
+    next_values = np.array([0.0, 1e6 if how == "terminated" else 4.0, 2.0])
+    advantages = student.gae(np.ones(3), np.zeros(3), next_values, terminated, truncated, 0.5, 1.0)
+    check_array(advantages, "gae", (3,), f"Â for three steps, step 1 {how}")
+    check_close(
+        advantages,
+        [1.5, 1.0, 2.0] if how == "terminated" else [2.5, 3.0, 2.0],
+        "gae",
+        f"Â for three steps whose episode ends at step 1 by {how[:-2]}ion, γ = 0.5, λ = 1 (Â_1 = δ_1: nothing flows "
+        "back from step 2, which starts a new episode; Â_0 = δ_0 + γλ Â_1)",
+        where=describe_step(terminated, truncated),
     )
 
 

@@ -15,8 +15,8 @@ pytestmark = pytest.mark.timeout(10)
 
 # (V, V_old, V^targ, ε) for one sample, and what happens there
 VALUE_CASES = [
-    (0.5, 0.0, 1.0, 0.2, "V moved 0.5 > ε toward the target: the clipped error is larger, and V^clip is flat there"),
     (-0.5, 0.0, 1.0, 0.2, "V moved 0.5 > ε away from the target: the unclipped error is larger"),
+    (0.5, 0.0, 1.0, 0.2, "V moved 0.5 > ε toward the target: the clipped error is larger, and V^clip is flat there"),
     (0.1, 0.0, 1.0, 0.2, "V moved 0.1 < ε: V^clip = V, the two errors are equal"),
     (2.0, 1.0, 0.0, 0.4, "V moved 1 > ε away from the target: the unclipped error is larger"),
     (0.3, 1.0, 0.0, 0.4, "V moved 0.7 > ε toward the target: the clipped error is larger, and V^clip is flat there"),
@@ -36,6 +36,8 @@ def test_clipped_value_loss_one_sample(student, v, v_old, target, epsilon, case)
         "ε fixed at 0.2 (the epsilon argument ignored)": None
         if epsilon == 0.2
         else 0.5 * max(error**2, (v_old + min(max(v - v_old, -0.2), 0.2) - target) ** 2),
+        "the plain loss ½ (V − V^targ)², as if nothing were clipped: is V clipped around V^targ instead of around "
+        "V_old (V^clip = V_old + clip(V − V_old, −ε, ε))": 0.5 * error**2,
     }
     expect_number(loss, expected_loss, "clipped_value_loss", f"the loss for {sample}", case, alternatives=loss_mistakes)
     check_array(grad, "clipped_value_loss", (1,), f"the gradient for {sample}")
@@ -175,6 +177,9 @@ def test_clip_vf_s_objective_value_and_gradients(student, objective_batch, c1, c
         "the value loss added (+c1 L^VF); it enters with a minus": reference_objective(*args[:7], -c1, c2),
         "the entropy bonus subtracted (−c2 S); it enters with a plus": reference_objective(*args[:7], c1, -c2),
         "c1 and c2 swapped": reference_objective(*args[:7], c2, c1),
+        "the value loss without its ½": reference_objective(*args[:7], 2 * c1, c2),
+        "the entropy summed over the batch, not averaged": reference_objective(*args[:7], c1, c2 * len(logp)),
+        "the value error summed over the batch, not averaged": reference_objective(*args[:7], c1 * len(logp), c2),
     }
     expect_number(
         value,

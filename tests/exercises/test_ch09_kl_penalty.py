@@ -4,7 +4,14 @@ surrogate, and eq. 8's rule for β case by case, including its boundaries."""
 import _harness
 import numpy as np
 import pytest
-from _harness import call_checking_inputs, check_array, check_close, check_scalar, numerical_gradient
+from _harness import (
+    call_checking_inputs,
+    check_array,
+    check_close,
+    check_scalar,
+    expect_number,
+    numerical_gradient,
+)
 
 student = _harness.student  # the fixture: the implementation under test (see _harness.py)
 pytest_generate_tests = _harness.pytest_generate_tests  # one run per wrong variant under MINIPPO_IMPL=wrong
@@ -106,11 +113,20 @@ def test_kl_penalty_objective_value_and_gradients(student, rng, n, beta):
     value, grad_logp, grad_kl = call_checking_inputs(
         student.kl_penalty_objective, "kl_penalty_objective", logp, logp_old, advantages, kl, beta
     )
-    check_close(
-        check_scalar(value, "kl_penalty_objective"),
+    ratio = np.exp(logp - logp_old)
+    expect_number(
+        value,
         reference(),
         "kl_penalty_objective",
-        f"the value Ê[r Â − β KL] (β = {beta})",
+        f"the value Ê[r Â − β KL] (β = {beta}, n = {n})",
+        alternatives={
+            "the penalty added (+β KL); it enters with a minus": float(np.mean(ratio * advantages + beta * kl)),
+            "the KL summed over the batch, not averaged": float(np.mean(ratio * advantages)) - beta * float(np.sum(kl))
+            if n > 1
+            else None,
+            "log r Â in place of r Â": float(np.mean((logp - logp_old) * advantages - beta * kl)),
+            "the KL penalty missing": float(np.mean(ratio * advantages)),
+        },
     )
     check_array(grad_logp, "kl_penalty_objective", (n,), "∂L/∂ log π")
     check_array(grad_kl, "kl_penalty_objective", (n,), "∂L/∂KL")
@@ -124,14 +140,16 @@ def test_kl_penalty_objective_value_and_gradients(student, rng, n, beta):
 
 @pytest.mark.parametrize(
     "kl, expected, why",
-    [
+    [  # well inside each of the three ranges first, then just beside the thresholds, then exactly on them
         (0.5, 0.5, "d < d_targ/1.5: β is halved"),
-        (1.99, 0.5, "d just below d_targ/1.5: β is halved"),
-        (2.0, 1.0, "d exactly d_targ/1.5: β stays"),
-        (3.0, 1.0, "d = d_targ: β stays"),
-        (4.5, 1.0, "d exactly 1.5·d_targ: β stays"),
-        (4.51, 2.0, "d just above 1.5·d_targ: β is doubled"),
         (30.0, 2.0, "d > 1.5·d_targ: β is doubled, once"),
+        (3.0, 1.0, "d = d_targ: β stays"),
+        (2.5, 1.0, "d_targ/1.5 < d < d_targ: β stays; it is halved only below d_targ/1.5"),
+        (3.9, 1.0, "d_targ < d < 1.5·d_targ: β stays; it is doubled only above 1.5·d_targ"),
+        (1.99, 0.5, "d just below d_targ/1.5: β is halved"),
+        (4.51, 2.0, "d just above 1.5·d_targ: β is doubled"),
+        (2.0, 1.0, "d exactly d_targ/1.5: β stays"),
+        (4.5, 1.0, "d exactly 1.5·d_targ: β stays"),
     ],
 )
 def test_adaptive_beta_rule(student, kl, expected, why):

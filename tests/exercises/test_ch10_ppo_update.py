@@ -1,6 +1,6 @@
 """Grading chapter 10: the assembled loss against its definition and finite differences at several configurations
-(ε, c1, c2, advantage normalisation on and off), the epoch and minibatch loop (the exact order of the rows, with and
-without shuffling, from the rng passed in; each minibatch's own gradient; the gradient clip; the number of steps), and
+(ε, c1, c2, advantage normalisation on and off), the epoch and minibatch loop (the number of steps, the exact order of
+the rows with and without shuffling from the rng passed in, the gradient clip, each minibatch's own gradient), and
 finally PPO learning CartPole-v1 with your update inside minippo's rollout, a backstop rather than the evidence.
 
 Tests run from the most specific to the most general, so the first failure names the mistake."""
@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from _harness import call_checking_inputs, check_close, check_scalar, numerical_gradient, where_is_ratio
 
+from minippo import losses
 from minippo.agent import ActorCritic
 from minippo.optimizer import linear_schedule
 from minippo.ppo import Config, Trainer, compute_advantages
@@ -50,19 +51,24 @@ def make_minibatch(agent, n=16, seed=4):
     }
 
 
-def loss_terms(agent, minibatch, config, normalize=None, epsilon=None, ddof=0):
+def loss_terms(agent, minibatch, config, normalize=None, epsilon=None, ddof=0, in_root=False):
     """(L^CLIP, L^VF with its ½, Ê[S]) written out; the advantages normalised over the minibatch when the config says
-    so (``normalize`` overrides that: True also normalises a single sample)."""
+    so (``normalize`` overrides that: True also normalises a single sample; ``in_root`` divides by √(var + 1e-8))."""
     out, values, _ = agent.forward(minibatch["obs"])
     dist = agent.distribution(out)
     advantages = minibatch["advantages"]
     if normalize or (normalize is None and config.normalize_advantages and len(advantages) > 1):
-        advantages = (advantages - advantages.mean()) / (advantages.std(ddof=ddof) + 1e-8)
+        scale = np.sqrt(advantages.var(ddof=ddof) + 1e-8) if in_root else advantages.std(ddof=ddof) + 1e-8
+        advantages = (advantages - advantages.mean()) / scale
     ratio = np.exp(dist.log_prob(minibatch["actions"]) - minibatch["logp"])
     eps = config.clip_epsilon if epsilon is None else epsilon
     clip_term = np.mean(np.minimum(ratio * advantages, np.clip(ratio, 1 - eps, 1 + eps) * advantages))
     value_term = 0.5 * np.mean((values - minibatch["returns"]) ** 2)
     return float(clip_term), float(value_term), float(np.mean(dist.entropy()))
+
+
+def values_of(agent, minibatch):
+    return agent.forward(minibatch["obs"])[1]
 
 
 def reference_loss(agent, minibatch, config):
@@ -94,6 +100,12 @@ def check_loss(loss, agent, minibatch, config, what):
         "the advantages are normalised although config.normalize_advantages is False": None,
         "a minibatch of one sample is normalised (its advantage becomes 0); leave it as it is": None,
         "the advantages are normalised with the sample standard deviation (ddof = 1); the contract says np.std": None,
+        "the advantages are divided by √(var Â + 1e-8), the 1e-8 inside the square root; the contract divides by "
+        "std Â + 1e-8": None,
+        "L^VF is computed from minibatch['values'] (the rollout's old values) instead of the network's V_θ(s_t) from "
+        "agent.forward": None,
+        "the value loss is clipped around minibatch['values'] (config.clip_value_loss); loss_and_grad has no value "
+        "clipping": None,
     }
     n = len(minibatch["advantages"])
     names = list(candidates)
@@ -107,6 +119,12 @@ def check_loss(loss, agent, minibatch, config, what):
         candidates[names[8]] = -loss_terms(agent, minibatch, config, normalize=True)[0] + c1 * value_term - c2 * entropy
     if config.normalize_advantages and n > 1:
         candidates[names[9]] = -loss_terms(agent, minibatch, config, ddof=1)[0] + c1 * value_term - c2 * entropy
+        candidates[names[10]] = -loss_terms(agent, minibatch, config, in_root=True)[0] + c1 * value_term - c2 * entropy
+    if "values" in minibatch:  # the rollout's values, which the value loss must not use
+        old_values, returns = minibatch["values"], minibatch["returns"]
+        candidates[names[11]] = -clip_term + c1 * 0.5 * float(np.mean((old_values - returns) ** 2)) - c2 * entropy
+        clipped = losses.value_loss(values_of(agent, minibatch), returns, old_values, config.clip_epsilon)[0]
+        candidates[names[12]] = -clip_term + c1 * clipped - c2 * entropy
     # a config field ignored: the loss is the one for the field's default value
     for field in ("clip_epsilon", "value_coef", "entropy_coef", "normalize_advantages"):
         default = getattr(Config(), field)
@@ -126,6 +144,41 @@ def check_loss(loss, agent, minibatch, config, what):
         + (f": {why}" if why else "")
         + f" (L^CLIP = {clip_term:.4g}, L^VF = {value_term:.4g}, S = {entropy:.4g}, c1 = {c1}, c2 = {c2})"
     )
+
+
+def describe_parameter(agent, got, expected):
+    """check_close's ``where`` for a gradient over agent.params: which weight the failing entry is, and which parts of
+    the gradient (the policy network, the value network, log σ) are right."""
+    blocks, parts, offset = [], {}, 0
+    for name, net in agent.nets.items():
+        start = offset
+        for layer, (W, b) in enumerate(zip(net.W, net.b)):
+            for what, size in (("W", W.size), ("b", b.size)):
+                blocks.append((f"{what} of layer {layer + 1} of the {name} network", offset, offset + size))
+                offset += size
+        parts[f"the {name} network"] = slice(start, offset)
+    if agent.kind == "continuous":
+        blocks.append(("log σ", offset, len(got)))
+        parts["log σ"] = slice(offset, len(got))
+    summary = []
+    for part, where in parts.items():
+        mine, want = np.asarray(got[where], dtype=np.float64), expected[where]
+        if np.allclose(mine, want, rtol=1e-5, atol=1e-7):
+            summary.append(f"{part}: right")
+        elif not np.any(mine):
+            summary.append(f"{part}: all 0")
+        else:
+            big = np.abs(want) > 1e-6
+            factor = float(np.median(mine[big] / want[big])) if big.any() else 0.0
+            same_factor = big.any() and np.allclose(mine, factor * want, rtol=1e-4, atol=1e-7)
+            summary.append(f"{part}: {factor:.3g} × the expected" if same_factor else f"{part}: wrong")
+
+    def describe(index):
+        i = int(index[0])
+        block = next(name for name, start, stop in blocks if start <= i < stop)
+        return f"{block}; by part, {', '.join(summary)}"
+
+    return describe
 
 
 CONFIGS = {
@@ -181,6 +234,20 @@ def test_loss_and_grad_with_equal_advantages(student):
     )
 
 
+def test_loss_and_grad_with_advantages_of_tiny_spread(student):
+    # std Â = 1e-4: dividing by std Â + 1e-8 still gives advantages of about ±1; √(var Â + 1e-8) would not
+    config = Config(entropy_coef=0.01)
+    agent = make_agent("discrete")
+    minibatch = make_minibatch(agent)
+    advantages = minibatch["advantages"]
+    minibatch["advantages"] = 2.0 + 1e-4 * (advantages - advantages.mean()) / advantages.std()
+    loss = check_scalar(student.loss_and_grad(agent, minibatch, config), "loss_and_grad", "the loss")
+    expected = reference_loss(agent, minibatch, config)
+    if abs(loss - expected) > 1e-3 * (1 + abs(expected)):  # a guard against std = 0 in place of the 1e-8 passes
+        what = "the loss for advantages with a tiny spread (std Â = 1e-4; normalised, they are still about ±1)"
+        check_loss(loss, agent, minibatch, config, what)
+
+
 def test_loss_and_grad_normalises_advantages_per_minibatch(student):
     config = Config(entropy_coef=0.01)
     agent = make_agent("discrete")
@@ -217,6 +284,7 @@ def test_loss_and_grad_matches_the_definition_and_finite_differences(student, ki
         f"agent.grads, ∂loss/∂θ ({kind} actions, {settings}; checked by finite differences)",
         1e-5,
         1e-7,
+        where=describe_parameter(agent, grads, numeric),
     )
 
 
@@ -320,6 +388,33 @@ def test_ppo_update_takes_the_rows_in_the_contract_s_order(student, shuffle):
     raise AssertionError(f"ppo_update: {why}; the rows seen were {shown}; expected {[e.tolist() for e in expected]}")
 
 
+def test_ppo_update_clips_the_gradient_norm(student):
+    agent = make_agent("discrete")
+    data = make_minibatch(agent)
+    for clipping in (True, False):
+        config = Config(epochs=2, minibatch_size=8, grad_norm_clipping=clipping, max_grad_norm=1e-3)
+        agent = make_agent("discrete")
+        optimizer = RecordingSGD(agent.params, lr=1e-4)
+        student.ppo_update(agent, optimizer, data, config, np.random.default_rng(1))
+        norms = [float(np.linalg.norm(g)) for g in optimizer.received]
+        assert norms, "ppo_update: optimizer.step was never called"
+        if clipping:
+            assert max(norms) <= 1e-3 * (1 + 1e-4), (
+                f"ppo_update: with grad_norm_clipping the gradient's global norm should be at most max_grad_norm = "
+                f"0.001, but one step got a gradient of norm {max(norms):.3g}"
+            )
+            assert min(norms) > 0.9e-3, (
+                "ppo_update: clipping should rescale the gradient to the limit, not shrink it "
+                "further (the gradients here are far larger than 0.001)"
+            )
+        else:
+            assert min(norms) > 1e-3 * (1 + 1e-4), (
+                f"ppo_update: with grad_norm_clipping = False the gradient should not be clipped, but a step got a "
+                f"gradient of norm {min(norms):.3g}, the max_grad_norm = 0.001 of the config (the gradients here are "
+                "far larger): is config.grad_norm_clipping ignored?"
+            )
+
+
 def test_ppo_update_gives_each_minibatch_its_own_gradient(student):
     # lr = 0 keeps θ fixed, so each step's gradient must be that of its own minibatch, advantages normalised over it
     config = Config(epochs=1, minibatch_size=5, shuffle_minibatches=False, grad_norm_clipping=False, entropy_coef=0.01)
@@ -342,6 +437,7 @@ def test_ppo_update_gives_each_minibatch_its_own_gradient(student):
             "∂loss/∂θ of that minibatch alone, its advantages normalised over the minibatch, not the whole batch)",
             1e-5,
             1e-7,
+            where=describe_parameter(agent, optimizer.received[k], expected),
         )
 
 
@@ -361,31 +457,9 @@ def test_ppo_update_on_one_full_batch_takes_one_gradient_step(student):
         "the gradient given to optimizer.step (it should be ∂loss/∂θ, the gradient of the loss to minimise)",
         1e-5,
         1e-7,
+        where=describe_parameter(agent, optimizer.received[0], expected),
     )
     check_close(agent.params, before - 0.01 * expected, "ppo_update", "the parameters after one step", 1e-5, 1e-9)
-
-
-def test_ppo_update_clips_the_gradient_norm(student):
-    agent = make_agent("discrete")
-    data = make_minibatch(agent)
-    for clipping in (True, False):
-        config = Config(epochs=2, minibatch_size=8, grad_norm_clipping=clipping, max_grad_norm=1e-3)
-        agent = make_agent("discrete")
-        optimizer = RecordingSGD(agent.params, lr=1e-4)
-        student.ppo_update(agent, optimizer, data, config, np.random.default_rng(1))
-        norms = [float(np.linalg.norm(g)) for g in optimizer.received]
-        assert norms, "ppo_update: optimizer.step was never called"
-        if clipping:
-            assert max(norms) <= 1e-3 * (1 + 1e-4), (
-                f"ppo_update: with grad_norm_clipping the gradient's global norm should be at most max_grad_norm = "
-                f"0.001, but one step got a gradient of norm {max(norms):.3g}"
-            )
-            assert min(norms) > 0.9e-3, (
-                "ppo_update: clipping should rescale the gradient to the limit, not shrink it "
-                "further (the gradients here are far larger than 0.001)"
-            )
-        else:
-            assert min(norms) > 1e-3, "ppo_update: without grad_norm_clipping the gradient should not be clipped"
 
 
 # Algorithm 1 with your update: CartPole-v1 must learn.

@@ -89,6 +89,23 @@ def sequences(rng):
     return logp, logp_ref, np.array([2.0, -1.5, 0.7]), np.array([5, 2, 1])
 
 
+def describe_token(index, lengths, logp, logp_ref, scores, beta):
+    """check_close's ``where`` for a (sequence, token) entry: the token's place in its sequence and its inputs."""
+    row, t = int(index[0]), int(index[1])
+    length = int(lengths[row])
+    place = (
+        "its last token, t = length − 1"
+        if t == length - 1
+        else "inside the sequence"
+        if t < length - 1
+        else "padding after the end, t ≥ length"
+    )
+    return (
+        f"sequence {row} of length {length}, token t = {t}: {place}; log π − log π_ref = "
+        f"{logp[row, t] - logp_ref[row, t]:.4g}, R(x) = {scores[row]:g}, β = {beta:g}"
+    )
+
+
 def test_kl_shaped_rewards_by_hand(student):
     logp = np.log(np.array([[0.5, 0.5, 0.5], [0.2, 0.2, 0.2]]))
     logp_ref = np.log(np.array([[0.25, 0.5, 0.9], [0.4, 0.4, 0.4]]))
@@ -103,6 +120,7 @@ def test_kl_shaped_rewards_by_hand(student):
         expected,
         "kl_shaped_rewards",
         "the rewards (−β log π/π_ref per token, R(x) added on the last token t = length − 1, 0 after)",
+        where=lambda i: describe_token(i, np.array([2, 3]), logp, logp_ref, np.array([3.0, -1.0]), 0.5),
     )
 
 

@@ -184,6 +184,9 @@ def test_check_close_names_a_whole_result_off_by_one_factor():
     assert "the sign is flipped everywhere" in _message(_harness.check_close, -expected, expected, "f", "x")
     assert "n times too large" in _message(_harness.check_close, 4 * expected, expected, "f", "x")
     assert "twice the expected" in _message(_harness.check_close, 2 * expected, expected, "f", "x")
+    # a gradient summed over a batch of 5 without one row per sample: the mean in its place is named with that n
+    text = _message(_harness.check_close, expected / 5, expected, "f", "grad_b", n=5)
+    assert "n = 5 times too small everywhere: a mean where the sum belongs" in text, text
 
 
 def test_check_close_shows_the_inputs_at_the_failing_entry():

@@ -19,7 +19,16 @@ def normalize_advantages_by_hand(advantages):
     return (advantages - mean) / (std + 1e-8)
 
 
+def normalize_advantages_guarding_zero_std(advantages):
+    """A guard against std = 0 in place of the 1e-8: the same numbers unless the spread is below about 1e-5."""
+    if len(advantages) < 2:
+        return advantages.copy()
+    std = advantages.std()
+    return (advantages - advantages.mean()) / std if std > 0 else np.zeros(len(advantages))
+
+
 VARIANTS = {
     "pg_objective_dot": {"pg_objective": pg_objective_dot},
     "normalize_advantages_by_hand": {"normalize_advantages": normalize_advantages_by_hand},
+    "normalize_advantages_guarding_zero_std": {"normalize_advantages": normalize_advantages_guarding_zero_std},
 }

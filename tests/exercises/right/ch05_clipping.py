@@ -17,7 +17,13 @@ def clip_fraction_two_sides(logp, logp_old, epsilon):
     return float(np.count_nonzero((ratio < 1.0 - epsilon) | (ratio > 1.0 + epsilon)) / len(ratio))
 
 
+def clip_fraction_expm1(logp, logp_old, epsilon):
+    """r − 1 computed as expm1(log π − log π_old), exact to the last digit near r = 1."""
+    return float(np.mean(np.abs(np.expm1(logp - logp_old)) > epsilon))
+
+
 VARIANTS = {
     "clipped_surrogate_closed_band": {"clipped_surrogate": clipped_surrogate_closed_band},
     "clip_fraction_two_sides": {"clip_fraction": clip_fraction_two_sides},
+    "clip_fraction_expm1": {"clip_fraction": clip_fraction_expm1},
 }

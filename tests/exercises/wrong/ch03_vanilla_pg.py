@@ -89,8 +89,16 @@ def pg_objective_integer_length(logp, advantages):
     return float(np.mean(logp * advantages)), (advantages / len(logp)).astype(np.float32)
 
 
+def normalize_epsilon_inside_the_root(advantages):
+    """√(var + 1e-8) for the scale: the 1e-8 inside the square root, not added to the standard deviation."""
+    if len(advantages) < 2:
+        return advantages.copy()
+    return (advantages - advantages.mean()) / np.sqrt(advantages.var() + 1e-8)
+
+
 VARIANTS.update(
     {
+        "normalize_epsilon_inside_the_root": {"normalize_advantages": normalize_epsilon_inside_the_root},
         "normalize_sample_std": {"normalize_advantages": normalize_sample_std},
         "normalize_single_returns_input": {"normalize_advantages": normalize_single_returns_input},
         "pg_objective_value_as_array": {"pg_objective": pg_objective_value_as_array},
@@ -99,6 +107,7 @@ VARIANTS.update(
 )
 
 FIRST_FAILURE = {
+    "normalize_epsilon_inside_the_root": r"tiny spread.*inside the square root",
     "normalize_sample_std": r"ddof = 0",
     "normalize_single_returns_input": r"returned one of its inputs",
     "pg_objective_value_as_array": r"single number",

@@ -36,9 +36,15 @@ def cpi_value_of_log_ratio(logp, logp_old, advantages):
     return float(np.mean((logp - logp_old) * advantages)), advantages / len(logp)
 
 
+def ratio_first_order(logp, logp_old):
+    """1 + (log π − log π_old), the first-order approximation of r: right only at r = 1."""
+    return 1.0 + (logp - logp_old)
+
+
 VARIANTS = {
     "ratio_of_exponentials": {"importance_ratio": ratio_of_exponentials},
     "ratio_inverted": {"importance_ratio": ratio_inverted},
+    "ratio_first_order": {"importance_ratio": ratio_first_order},
     "ratio_of_log_probs": {"importance_ratio": ratio_of_log_probs},
     "cpi_gradient_without_ratio": {"cpi_objective": cpi_gradient_without_ratio},
     "cpi_gradient_without_advantage": {"cpi_objective": cpi_gradient_without_advantage},
@@ -62,4 +68,6 @@ VARIANTS.update({"cpi_summed": {"cpi_objective": cpi_summed}, "ratio_float32": {
 FIRST_FAILURE = {
     "ratio_float32": r"float64.*not float32",
     "ratio_of_exponentials": r"−800|underflow",
+    "ratio_first_order": r"first-order approximation",
+    "ratio_inverted": r"the inverse \(log π and log π_old swapped\?\)",
 }

@@ -115,8 +115,20 @@ def clip_fraction_epsilon_fixed(logp, logp_old, epsilon):
     return float(np.mean(np.abs(np.exp(logp - logp_old) - 1) > 0.2))
 
 
+def clip_fraction_of_the_inverse_ratio(logp, logp_old, epsilon):
+    """r computed as π_old/π, exp(log π_old − log π): the same for ratios far from 1, wrong near the band's edges."""
+    return float(np.mean(np.abs(np.exp(logp_old - logp) - 1) > epsilon))
+
+
+def clip_fraction_at_least_epsilon(logp, logp_old, epsilon):
+    """|r − 1| ≥ ε: a ratio exactly on an edge of the band counted as outside."""
+    return float(np.mean(np.abs(np.exp(logp - logp_old) - 1) >= epsilon))
+
+
 VARIANTS.update(
     {
+        "clip_fraction_of_the_inverse_ratio": {"clip_fraction": clip_fraction_of_the_inverse_ratio},
+        "clip_fraction_at_least_epsilon": {"clip_fraction": clip_fraction_at_least_epsilon},
         "clipped_band_on_log_ratio": {"clipped_surrogate": clipped_band_on_log_ratio},
         "clipped_epsilon_fixed": {"clipped_surrogate": clipped_epsilon_fixed},
         "clipped_gradient_of_the_clipped_ratio": {"clipped_surrogate": clipped_gradient_of_the_clipped_ratio},
@@ -145,4 +157,6 @@ FIRST_FAILURE = {
     "clip_fraction_on_log_ratio": r"r = 1\.21 .*not on log r",
     "clip_fraction_python_or": r"clip_fraction\(logp=array \(\d+,\).*truth value.*np\.where",
     "clip_fraction_epsilon_fixed": r"r = 1\.15 and ε = 0\.1",
+    "clip_fraction_of_the_inverse_ratio": r"r = 0\.83 .*should be 0, not 1.*π_old/π",
+    "clip_fraction_at_least_epsilon": r"exactly on the edges.*≥ ε",
 }

@@ -98,8 +98,27 @@ def gradient_of_the_min_value(logp, logp_old, advantages, epsilon):
     return float(np.mean(smaller)), smaller / len(logp)
 
 
+def clip_of_the_product(logp, logp_old, advantages, epsilon):
+    """np.clip(r Â, (1 − ε) Â, (1 + ε) Â): with Â < 0 the lower bound is above the upper one, and np.clip returns the
+    upper bound (1 + ε) Â wherever r is."""
+    ratio = np.exp(logp - logp_old)
+    unclipped = ratio * advantages
+    clipped = np.clip(unclipped, (1 - epsilon) * advantages, (1 + epsilon) * advantages)
+    return float(np.mean(np.minimum(unclipped, clipped))), np.where(unclipped <= clipped, unclipped, 0.0) / len(logp)
+
+
+def clip_of_the_log_ratio(logp, logp_old, advantages, epsilon):
+    """exp(clip(log r, −ε, ε)): the ratio held to (e^−ε, e^ε) instead of (1 − ε, 1 + ε)."""
+    ratio = np.exp(logp - logp_old)
+    unclipped = ratio * advantages
+    clipped = np.exp(np.clip(logp - logp_old, -epsilon, epsilon)) * advantages
+    return float(np.mean(np.minimum(unclipped, clipped))), np.where(unclipped <= clipped, unclipped, 0.0) / len(logp)
+
+
 VARIANTS.update(
     {
+        "clip_of_the_product": {"clip_objective": clip_of_the_product},
+        "clip_of_the_log_ratio": {"clip_objective": clip_of_the_log_ratio},
         "case_by_case_on_log_ratio": {"clip_objective": case_by_case_on_log_ratio},
         "gradient_mask_strict": {"clip_objective": gradient_mask_strict},
         "epsilon_fixed": {"clip_objective": epsilon_fixed},
@@ -118,4 +137,6 @@ FIRST_FAILURE = {
     "epsilon_fixed": r"ε = 0\.1.*ε fixed at 0\.2",
     "gradient_of_the_min_value": r"r = 1\.5, Â = 1\.0.*should be 0",
     "ratio_from_exponentials": r"near −900.*exp\(log π − log π_old\)",
+    "clip_of_the_product": r"r = 0\.9, Â = -1\.0.*np\.clip\(r Â, \(1 − ε\) Â, \(1 \+ ε\) Â\)",
+    "clip_of_the_log_ratio": r"r = 1\.5, Â = 1\.0.*the log-ratio clipped to ±ε",
 }

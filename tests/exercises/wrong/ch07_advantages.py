@@ -221,8 +221,20 @@ def gae_python_if(rewards, values, next_values, terminated, truncated, gamma, la
     return advantages
 
 
+def gae_resets_a_step_early(rewards, values, next_values, terminated, truncated, gamma, lam):
+    """Checks the episode end of the step after: the last step of an episode is cut from the one before it, and the
+    episode's end still takes the next episode's advantages."""
+    deltas = correct_td_residuals(rewards, values, next_values, terminated, gamma)
+    ended = np.asarray(terminated) | np.asarray(truncated)
+    advantages = deltas.copy()
+    for t in range(len(deltas) - 2, -1, -1):
+        advantages[t] = deltas[t] + gamma * lam * np.where(ended[t + 1], 0.0, advantages[t + 1])
+    return advantages
+
+
 VARIANTS.update(
     {
+        "gae_resets_a_step_early": {"gae": gae_resets_a_step_early},
         "returns_python_if": {"discounted_returns": returns_python_if},
         "returns_zeros_like": {"discounted_returns": returns_zeros_like},
         "returns_bootstrap_last_step_always": {"discounted_returns": returns_bootstrap_last_step_always},
@@ -251,4 +263,10 @@ FIRST_FAILURE = {
     "gae_decays_by_lambda_only": r"gae",
     "gae_python_if": r"gae\(rewards=array \(24, 3\).*truth value",
     "gae_loop_never_ends": r"took longer than",
+    "td_next_value_from_the_next_row": r"td_residuals: .*next_values\[t\], not values\[t \+ 1\].*step 1",
+    "gae_ignores_episode_ends": r"ends at step 1 by termination.*step 1: terminated = True",
+    "gae_stops_only_at_termination": r"ends at step 1 by truncation.*step 1: terminated = False, truncated = True",
+    "gae_resets_after_the_end": r"ends at step 1 by termination",
+    "gae_resets_a_step_early": r"ends at step 1 by termination.*step 1: terminated = True",
+    "gae_truncation_as_termination": r"ends at step 1 by truncation",
 }

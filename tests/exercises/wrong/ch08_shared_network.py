@@ -137,7 +137,8 @@ VARIANTS.update(
 )
 
 FIRST_FAILURE = {
-    "clipped_value_loss_min": r"the clipped loss is pessimistic, it takes the max",
+    "clipped_value_loss_min": r"V moved 0\.5 > ε away.*the clipped loss is pessimistic, it takes the max\?$",
+    "clipped_value_loss_around_the_target": r"clipped around V\^targ instead of around V_old",
     "clipped_value_loss_gradient_through_clip": r"V\^clip is a constant",
     "clipped_value_loss_epsilon_fixed": r"ε = 0\.4.*ε fixed at 0\.2",
     "objective_epsilon_fixed": r"ε = 0\.35.*ε fixed at 0\.2",

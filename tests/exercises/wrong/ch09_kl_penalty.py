@@ -134,8 +134,18 @@ def penalty_beta_fixed(logp, logp_old, advantages, kl, beta):
     return float(np.mean(ratio * advantages - beta * kl)), ratio * advantages / n, np.full(n, -3.0 / n)
 
 
+def beta_rule_thresholds_of_2(beta, kl, kl_target):
+    """The factor 2 used for the thresholds too: d < d_targ/2 and d > 2·d_targ instead of d_targ/1.5 and 1.5·d_targ."""
+    if kl < kl_target / 2.0:
+        return beta / 2.0
+    if kl > kl_target * 2.0:
+        return beta * 2.0
+    return beta
+
+
 VARIANTS.update(
     {
+        "beta_rule_thresholds_of_2": {"adaptive_beta": beta_rule_thresholds_of_2},
         "kl_backward_unshifted": {"categorical_kl_backward": kl_backward_unshifted},
         "penalty_beta_fixed": {"kl_penalty_objective": penalty_beta_fixed},
     }
@@ -145,4 +155,8 @@ FIRST_FAILURE = {
     "kl_backward_unshifted": r"categorical_kl_backward.*±1000",
     "penalty_beta_fixed": r"β = 0\.25",
     "beta_rule_inclusive": r"exactly",
+    "beta_rule_against_the_target": r"d = 2\.5 .*halved only below d_targ/1\.5\), β = 1 should become 1\.0, not 0\.5",
+    "beta_rule_thresholds_of_2": r"d = 1\.99 .*should become 0\.5, not 1",
+    "beta_rule_swapped": r"d = 0\.5 .*halved.*should become 0\.5, not 2",
+    "beta_rule_by_1_5": r"should become 0\.5, not 0\.666667",
 }

@@ -10,7 +10,7 @@ from solutions.ch10_ppo_update import loss_and_grad
 
 
 def _assemble(agent, minibatch, config, normalize=True, normalize_one=False, value_sign=1.0, grad_sign=1.0,
-              entropy=True, c1_in_gradient=True):  # fmt: skip
+              entropy=True, c1_in_gradient=True, old_values=False):  # fmt: skip
     """loss_and_grad with switches for its usual mistakes."""
     out, values, cache = agent.forward(minibatch["obs"])
     dist = agent.distribution(out)
@@ -20,7 +20,9 @@ def _assemble(agent, minibatch, config, normalize=True, normalize_one=False, val
     if normalize and config.normalize_advantages and (n > 1 or normalize_one):
         advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
     clip_value, grad_logp = losses.clip_objective(logp, minibatch["logp"], advantages, config.clip_epsilon)
-    value_loss, grad_values = losses.value_loss(values, minibatch["returns"])
+    value_loss, grad_values = losses.value_loss(minibatch["values"] if old_values else values, minibatch["returns"])
+    if old_values:  # the stored values are constants: nothing flows into the value network
+        grad_values = np.zeros_like(grad_values)
     loss = -clip_value + value_sign * config.value_coef * value_loss
     grads = list(dist.log_prob_backward(minibatch["actions"], -grad_sign * grad_logp))
     if entropy and config.entropy_coef:
@@ -332,8 +334,62 @@ def update_counts_the_keys(agent, optimizer, data, config, rng):
     return steps
 
 
+def loss_epsilon_inside_the_root(agent, minibatch, config):
+    """(Â − mean Â) / √(var Â + 1e-8): the 1e-8 inside the square root, which matters only for a tiny spread."""
+    n = len(minibatch["advantages"])
+    if config.normalize_advantages and n > 1:
+        a = minibatch["advantages"]
+        minibatch = dict(minibatch, advantages=(a - a.mean()) / np.sqrt(a.var() + 1e-8))
+    return _assemble(agent, minibatch, config, normalize=False)
+
+
+def loss_value_of_the_old_values(agent, minibatch, config):
+    """L^VF from minibatch["values"], the rollout's values, instead of the network's V_θ(s_t): the value network gets
+    no gradient."""
+    return _assemble(agent, minibatch, config, old_values=True)
+
+
+def loss_clips_the_value_loss(agent, minibatch, config):
+    """The value loss clipped around minibatch["values"] (the "37 details" value clipping), which this exercise's
+    contract leaves out."""
+    out, values, cache = agent.forward(minibatch["obs"])
+    dist = agent.distribution(out)
+    logp = dist.log_prob(minibatch["actions"])
+    n = len(logp)
+    advantages = minibatch["advantages"]
+    if config.normalize_advantages and n > 1:
+        advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
+    clip_value, grad_logp = losses.clip_objective(logp, minibatch["logp"], advantages, config.clip_epsilon)
+    value_loss, grad_values = losses.value_loss(values, minibatch["returns"], minibatch["values"], config.clip_epsilon)
+    loss = -clip_value + config.value_coef * value_loss
+    grads = list(dist.log_prob_backward(minibatch["actions"], -grad_logp))
+    if config.entropy_coef:
+        loss -= config.entropy_coef * float(np.mean(dist.entropy()))
+        grads = [g + e for g, e in zip(grads, dist.entropy_backward(np.full(n, -config.entropy_coef / n)))]
+    agent.backward(cache, grads[0], config.value_coef * grad_values, grads[1] if len(grads) > 1 else None)
+    return float(loss)
+
+
+def update_always_clips(agent, optimizer, data, config, rng):
+    """Clips the gradient's norm whether or not config.grad_norm_clipping asks for it."""
+    n, steps = len(data["logp"]), 0
+    for _ in range(config.epochs):
+        order = rng.permutation(n) if config.shuffle_minibatches else np.arange(n)
+        for start in range(0, n, config.minibatch_size):
+            index = order[start : start + config.minibatch_size]
+            loss_and_grad(agent, {key: value[index] for key, value in data.items()}, config)
+            clip_grad_norm(agent.grads, config.max_grad_norm)
+            optimizer.step(agent.grads)
+            steps += 1
+    return steps
+
+
 VARIANTS.update(
     {
+        "loss_epsilon_inside_the_root": {"loss_and_grad": loss_epsilon_inside_the_root},
+        "loss_value_of_the_old_values": {"loss_and_grad": loss_value_of_the_old_values},
+        "update_always_clips": {"ppo_update": update_always_clips},
+        "loss_clips_the_value_loss": {"loss_and_grad": loss_clips_the_value_loss},
         "loss_normalises_without_epsilon": {"loss_and_grad": loss_normalises_without_epsilon},
         "update_counts_the_keys": {"ppo_update": update_counts_the_keys},
     }
@@ -342,5 +398,9 @@ FIRST_FAILURE.update(
     {
         "loss_normalises_without_epsilon": r"all equal \(std Â = 0\)|NaN",
         "update_counts_the_keys": r"optimizer steps|rows",
+        "loss_epsilon_inside_the_root": r"tiny spread.*the 1e-8 inside the square root",
+        "loss_value_of_the_old_values": r"minibatch\['values'\] \(the rollout's old values\)",
+        "loss_clips_the_value_loss": r"the value loss is clipped around minibatch\['values'\]",
+        "update_always_clips": r"grad_norm_clipping = False.*is config\.grad_norm_clipping ignored",
     }
 )

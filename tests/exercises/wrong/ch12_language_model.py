@@ -97,3 +97,25 @@ VARIANTS = {
     "rewards_beta_on_the_score": {"kl_shaped_rewards": rewards_beta_on_the_score},
     "rewards_kl_at_the_end": {"kl_shaped_rewards": rewards_kl_at_the_end},
 }
+
+
+def rewards_score_by_column_index(logp, logp_ref, scores, lengths, beta):
+    """rewards[:, lengths − 1] += scores: a column index for every row at once, so each sequence's score lands on every
+    sequence, at every sequence's last position."""
+    rewards = np.where(_inside(logp, lengths), -beta * (logp - logp_ref), 0.0)
+    rewards[:, lengths - 1] += scores
+    return rewards
+
+
+VARIANTS["rewards_score_by_column_index"] = {"kl_shaped_rewards": rewards_score_by_column_index}
+
+# what the first failing test's message must say (a regular expression), so that the scoreboard names the mistake
+FIRST_FAILURE = {
+    "bt_log_of_sigmoid": r"±1000 \(use np\.logaddexp",
+    "bt_gradient_not_averaged": r"n times too large everywhere",
+    "bt_gradient_on_preferred_only": r"∂L/∂r_l",
+    "rewards_score_one_step_late": r"token t = 2: padding after the end, t ≥ length.*got 3, expected 0",
+    "rewards_penalty_on_padding": r"padding after the end",
+    "rewards_beta_on_the_score": r"its last token, t = length − 1.*R\(x\) = 3, β = 0\.5\): got 1\.5, expected 3",
+    "rewards_score_by_column_index": r"sequence \d of length \d, token t = \d",
+}
