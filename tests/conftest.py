@@ -1,3 +1,6 @@
+import importlib.util
+import os
+import secrets
 import subprocess
 from pathlib import Path
 
@@ -58,3 +61,21 @@ def built_book() -> Path:
         if result.returncode != 0:
             pytest.fail("jupyter-book build failed:\n" + (result.stdout + result.stderr)[-4000:])
     return BOOK_HTML
+
+
+@pytest.fixture(scope="session")
+def ray_environment():
+    """Ray on loopback, no usage reports, and one token of this test session's own, so that nothing is written to the
+    home folder and the nodes and drivers of every test trust each other. Ray reads these variables when it is first
+    imported in a process, so every test that starts Ray (the sweep's and the side-by-side runner's) takes this one
+    fixture: two modules with settings of their own would leave the second with a Ray configured by the first."""
+    if importlib.util.find_spec("ray") is None:  # do not import Ray here: it reads the variables when imported
+        pytest.skip("Ray is not installed (pip install -e '.[sweep]')")
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
+        patch.setenv("RAY_USAGE_STATS_ENABLED", "0")
+        patch.setenv("RAY_AUTH_MODE", "token")
+        patch.setenv("RAY_AUTH_TOKEN", secrets.token_hex(32))
+        patch.setenv("PYTHONPATH", os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
+        patch.delenv("RAY_ADDRESS", raising=False)
+        yield

@@ -4,7 +4,6 @@ sweep engine (skipped when Stable-Baselines3 or Ray is not installed)."""
 
 import importlib.util
 import math
-import os
 import sys
 from pathlib import Path
 from types import SimpleNamespace
@@ -215,14 +214,8 @@ def test_the_runner_refuses_what_it_cannot_run(capsys):
 
 
 @pytest.fixture
-def ray_here(monkeypatch):
-    """Ray on loopback without usage reports; its workers import this checkout's minippo."""
-    if importlib.util.find_spec("ray") is None:
-        pytest.skip("Ray is not installed (pip install -e '.[sweep]')")
-    monkeypatch.setenv("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
-    monkeypatch.setenv("RAY_USAGE_STATS_ENABLED", "0")
-    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
-    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+def ray_here(ray_environment):
+    """Ray in the session's environment (conftest.py): loopback, no usage reports, this checkout's minippo."""
 
 
 @pytest.mark.skipif(importlib.util.find_spec("stable_baselines3") is None, reason="stable-baselines3 not installed")

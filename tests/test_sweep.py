@@ -3,9 +3,7 @@ finished runs and the same command resumes; a failing run is recorded and the ot
 started with ``ray start`` on this machine (loopback only) runs the sweep on both nodes."""
 
 import csv
-import importlib.util
 import os
-import secrets
 import shlex
 import shutil
 import signal
@@ -26,20 +24,9 @@ ROOT = Path(__file__).resolve().parents[1]
 TIMING = {"steps_per_s", "wall_s"}  # the clock columns, the only ones that differ between two identical runs
 
 
-@pytest.fixture(scope="module", autouse=True)
-def ray_environment():
-    """Ray on loopback, no usage reports, and a token of this test module's own, so that nothing is written to
-    the home folder and the cluster's nodes and the driver trust each other."""
-    if importlib.util.find_spec("ray") is None:  # Ray reads these variables when imported: do not import it yet
-        pytest.skip("Ray is not installed (pip install -e '.[sweep]')")
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setenv("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
-        patch.setenv("RAY_USAGE_STATS_ENABLED", "0")
-        patch.setenv("RAY_AUTH_MODE", "token")
-        patch.setenv("RAY_AUTH_TOKEN", secrets.token_hex(32))
-        patch.setenv("PYTHONPATH", os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
-        patch.delenv("RAY_ADDRESS", raising=False)
-        yield
+@pytest.fixture(autouse=True)
+def _ray(ray_environment):
+    """Every test here runs in the session's Ray environment (conftest.py)."""
 
 
 def rows_of(path) -> list[dict]:
