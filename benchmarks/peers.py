@@ -24,7 +24,6 @@ import importlib.util
 import json
 import os
 import socket
-import subprocess
 import sys
 import tempfile
 import time
@@ -335,20 +334,7 @@ def peer_row(run, row: dict, result: dict) -> dict:
 
 def code_commit() -> str:
     """The short commit, with "+dirty" when minippo/ or this file (which sets SB3 up) has uncommitted edits."""
-    try:
-        head = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"], cwd=records.ROOT, capture_output=True, text=True, check=True
-        ).stdout.strip()
-        status = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no", "--", "minippo", "benchmarks/peers.py"],
-            cwd=records.ROOT,
-            capture_output=True,
-            text=True,
-            check=True,
-        ).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-    return head + ("+dirty" if status else "")
+    return records.git_commit(("minippo", "benchmarks/peers.py"))
 
 
 def ship_by_value() -> None:

@@ -36,15 +36,15 @@ def relative(path) -> str:
         return str(path)
 
 
-def git_commit() -> str:
-    """The short commit of the code that runs, with "+dirty" when tracked files in minippo/ (the code that trains)
-    have uncommitted edits."""
+def git_commit(paths: tuple[str, ...] = ("minippo",)) -> str:
+    """The short commit of the code that runs, with "+dirty" when tracked files under ``paths`` (by default minippo/,
+    the code that trains) have uncommitted edits."""
     try:
         head = subprocess.run(
             ["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True, check=True
         ).stdout.strip()
         status = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no", "--", "minippo"],
+            ["git", "status", "--porcelain", "--untracked-files=no", "--", *paths],
             cwd=ROOT,
             capture_output=True,
             text=True,
