@@ -179,8 +179,9 @@ def table1_verdict(table: list[dict], pending: list[str] = ()) -> str:
         )
     if pending:
         text += (
-            f" Not shown: {len(pending)} KL-penalty settings ({', '.join(pending)}), being rerun after a fix to the "
-            "penalty, which had compared the new policy with the old policy's means but the current σ; their earlier "
+            f" Not shown: {len(pending)} KL-penalty setting{'' if len(pending) == 1 else 's'} ({', '.join(pending)}), "
+            "being rerun after a fix to the "
+            "penalty, which had compared the new policy with the old policy's means but the current σ; the earlier "
             "runs are kept in `benchmarks/results/stale/` and not scored."
         )
     return text
@@ -862,7 +863,8 @@ def table1_sentence(table: list[dict], pending: list[str]) -> str:
     text += "."
     if pending:
         text += (
-            f" {len(pending)} KL-penalty settings are being rerun after a fix to the penalty and are not scored yet."
+            f" {len(pending)} KL-penalty setting{' is' if len(pending) == 1 else 's are'} being rerun after a fix"
+            " to the penalty and not scored yet."
         )
     return text
 
