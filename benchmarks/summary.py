@@ -149,6 +149,18 @@ def stale_settings(runs_csv: str, table: list[dict]) -> list[str]:
     return [name for name, _, _ in TABLE1_SETTINGS if name in stale and name not in scored]
 
 
+def noise_text(row: dict, best: dict) -> str:
+    """How a setting's gap to the best compares with the seeds' noise: twice the standard error of the difference of
+    the two scores (the scores' errors combined as independent), or nothing when a score has no error."""
+    if not row.get("score_se") or not best.get("score_se"):
+        return ""
+    gap = float(best["score"]) - float(row["score"])
+    error = math.hypot(float(row["score_se"]), float(best["score_se"]))
+    if gap <= 2 * error:
+        return f", a gap of {gap:.2f}, within twice its standard error ({error:.2f}): level within the seeds' noise"
+    return f", a gap of {gap:.2f}, more than twice its standard error ({error:.2f})"
+
+
 def table1_verdict(table: list[dict], pending: list[str] = ()) -> str:
     """Where the paper's two landmarks rank here: clipping at ε = 0.2 (the paper's best) and no clipping (its worst).
     ``pending``: settings being rerun, named so that nobody reads the table as complete."""
@@ -169,7 +181,8 @@ def table1_verdict(table: list[dict], pending: list[str] = ()) -> str:
         elif none_rank == len(names):
             verdict = (
                 f"is half reproduced: no clipping is last, as in the paper, but ε = 0.2 is not first "
-                f"({score_text(ranked[clip_rank - 1])} against {score_text(best)})."
+                f"({score_text(ranked[clip_rank - 1])} against {score_text(best)})"
+                f"{noise_text(ranked[clip_rank - 1], best)}."
             )
         else:
             verdict = "is not reproduced at this scale."

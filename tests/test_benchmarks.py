@@ -375,7 +375,13 @@ def test_table1_verdict_reads_the_ranks():
     other = table({"Clipping, ε = 0.2": 0.7, "Clipping, ε = 0.1": 0.8, **middle, "No clipping or penalty": 0.6})
     assert "the paper's ordering is not reproduced at this scale" in summary.table1_verdict(other)
     with_errors = [dict(row, score_se="0.05") for row in half]
-    assert "(0.70 ± 0.05 against 0.80 ± 0.05)" in summary.table1_verdict(with_errors)
+    assert "(0.70 ± 0.05 against 0.80 ± 0.05), a gap of 0.10, within twice its standard error (0.07): level" in (
+        summary.table1_verdict(with_errors)
+    )
+    far = [dict(row, score_se="0.01") for row in half]
+    assert "(0.70 ± 0.01 against 0.80 ± 0.01), a gap of 0.10, more than twice its standard error (0.01)." in (
+        summary.table1_verdict(far)
+    )
     partial = table({"Clipping, ε = 0.2": 0.8, "No clipping or penalty": -0.4})
     assert "is not settled: only 2 of the 11 settings are recorded" in summary.table1_verdict(partial)
 
