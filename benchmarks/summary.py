@@ -411,7 +411,9 @@ def peers_stats(rows: list[dict]) -> dict[tuple, dict]:
 
 
 def number(value: float, digits: int, sign: bool = False) -> str:
-    return f"{value:+,.{digits}f}" if sign else f"{value:,.{digits}f}"
+    """A figure with thousands separators, its sign written as + or the minus sign − (U+2212) when ``sign``."""
+    text = f"{value:+,.{digits}f}" if sign else f"{value:,.{digits}f}"
+    return text.replace("-", "\u2212")
 
 
 def peers_lines(rows: list[dict]) -> list[str]:

@@ -102,6 +102,7 @@ def test_peers_table_and_sentences(tmp_path):
         "| 2.0 / 10.0 |"
     )
     assert table[1].startswith("| Hopper-v5 | 999,424 | eval | 8,000 ± 1,155 (n = 3) | 3,000 ± 1,000 (n = 2) |")
+    assert summary.number(-572.4, 0, True) == "\u2212572" and summary.number(-1234.5, 1) == "\u22121,234.5"
     walker = "| Walker2d-v5 | 999,424 | train | 3,000 (n = 1) | 2,000 (n = 1) | — | incomplete | 10.0 / 10.0 |"
     assert walker in lines
     text = "\n".join(lines)
