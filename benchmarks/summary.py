@@ -1,6 +1,6 @@
 """Turn the benchmark records into benchmarks/results/summary.md and its figures.
 
-    python benchmarks/summary.py                 # summary.md, mujoco_curves.png, table1.png
+    python benchmarks/summary.py                 # summary.md, mujoco_curves.png, table1.png, peers_curves.png
     python benchmarks/summary.py --table-only    # print only the seven-task table
     python benchmarks/summary.py --readme        # rewrite the README's generated blocks from the records
 
@@ -968,6 +968,56 @@ def plot_mujoco(rows: list[dict], runs_root, out) -> Path | None:
     return Path(out)
 
 
+def plot_peers(rows: list[dict], runs_root, out) -> Path | None:
+    """One panel per task of the side-by-side record: each library's mean over its seeds of the last-100-episode
+    return against environment steps, and the band from the lowest to the highest seed (runs_root/<library>-<task>-
+    seed<S>/progress.csv, which both libraries write with the same columns)."""
+    from peers import TASKS as PEER_TASKS
+
+    tasks = [task for task in PEER_TASKS if any(row["task"] == task for row in rows)]
+    tasks += sorted({row["task"] for row in rows} - set(tasks))
+    if not tasks:
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from minippo.plotting import ORANGE, SAGE
+
+    colours = {"minippo": ORANGE, "sb3": SAGE}
+    fig, axes = plt.subplots(1, len(tasks), figsize=(4.2 * len(tasks), 3.4), dpi=100, squeeze=False)
+    for ax, task in zip(axes[0], tasks):
+        for library, name in PEER_LIBRARIES.items():
+            seeds = sorted(int(row["seed"]) for row in rows if row["task"] == task and row["library"] == library)
+            curves = [progress_curves(Path(runs_root) / f"{library}-{task}-seed{seed}") for seed in seeds]
+            curves = [curve for curve in curves if curve]
+            if not curves:
+                continue
+            grid = np.linspace(max(c[0][0] for c in curves), min(c[0][-1] for c in curves), 200)
+            values = np.array([np.interp(grid, steps, returns) for steps, returns in curves])
+            colour = colours[library]
+            ax.fill_between(grid, values.min(axis=0), values.max(axis=0), color=colour, alpha=0.2, lw=0)
+            ax.plot(
+                grid,
+                values.mean(axis=0),
+                color=colour,
+                lw=2,
+                label=f"{name}, {len(curves)} seed{'s' if len(curves) != 1 else ''}",
+            )
+        ax.set_title(task, fontsize=10)
+        ax.grid(alpha=0.3)
+        ax.ticklabel_format(axis="x", style="sci", scilimits=(0, 0))
+        ax.legend(frameon=False, fontsize=8, loc="upper left")
+    fig.supxlabel("environment steps", fontsize=9)
+    fig.supylabel("mean return, last 100 episodes", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(out)
+    plt.close(fig)
+    return Path(out)
+
+
 def plot_table1(table: list[dict], out, label: str = "minippo (reduced scale)") -> Path | None:
     if not table:
         return None
@@ -1060,7 +1110,14 @@ def build(results, runs_root) -> tuple[str, list[str]]:
     ]
     if table1:
         parts += ["![Table 1: minippo's scores beside the paper's](table1.png)", ""]
-    parts += ["## Side by side with Stable-Baselines3", "", *peers_lines(records.read_rows(results / "peers.csv")), ""]
+    peer_rows = records.read_rows(results / "peers.csv")
+    parts += ["## Side by side with Stable-Baselines3", "", *peers_lines(peer_rows), ""]
+    if peer_rows:
+        parts += [
+            "![minippo and SB3 learning curves: mean over seeds, band from the lowest to the highest seed]"
+            "(peers_curves.png)",
+            "",
+        ]
     parts += ["## Speed race", "", *speed_lines(speed), ""]
     return "\n".join(parts), table
 
@@ -1069,6 +1126,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--results", default=str(records.RESULTS), help="the folder of the CSV records")
     parser.add_argument("--runs", default=str(records.RUNS / "mujoco"), help="the seven-task run folders")
+    parser.add_argument("--peer-runs", default=str(records.RUNS / "peers"), help="the side-by-side run folders")
     parser.add_argument("--table-only", action="store_true", help="print the seven-task table and stop")
     parser.add_argument("--readme", action="store_true", help="rewrite the README's generated blocks and stop")
     args = parser.parse_args(argv)
@@ -1091,6 +1149,7 @@ def main(argv=None) -> int:
     plot_mujoco(records.read_rows(results / "mujoco.csv"), args.runs, results / "mujoco_curves.png")
     plot_table1(records.read_rows(results / "table1.csv"), results / "table1.png")
     plot_table1(records.read_rows(results / "table1_1m.csv"), results / "table1_1m.png", "minippo (1M steps a run)")
+    plot_peers(records.read_rows(results / "peers.csv"), args.peer_runs, results / "peers_curves.png")
     print(f"wrote {records.relative(results / 'summary.md')} and its figures")
     return 0
 

@@ -119,6 +119,36 @@ def test_peers_table_and_sentences(tmp_path):
     )
 
 
+def test_the_curves_figure_draws_each_librarys_seeds_and_skips_an_empty_record(tmp_path):
+    runs = tmp_path / "runs"
+    drawn = []
+    for library, level in (("minippo", 100.0), ("sb3", 50.0)):
+        for seed in (1, 2):
+            folder = runs / f"{library}-Hopper-v5-seed{seed}"
+            folder.mkdir(parents=True)
+            lines = ["update,step,return_mean"] + [f"{k},{2048 * k},{level * k + seed}" for k in range(1, 6)]
+            (folder / "progress.csv").write_text("\n".join(lines) + "\n")
+    rows = [peer_record(library, "Hopper-v5", seed, 1, 1) for library in ("minippo", "sb3") for seed in (1, 2)]
+
+    import matplotlib.axes
+
+    original = matplotlib.axes.Axes.plot
+
+    def spy(ax, x, y, *args, **kwargs):
+        drawn.append((kwargs.get("label"), list(x)[0], list(y)[0], list(y)[-1]))
+        return original(ax, x, y, *args, **kwargs)
+
+    matplotlib.axes.Axes.plot = spy
+    try:
+        out = summary.plot_peers(rows, runs, tmp_path / "peers_curves.png")
+    finally:
+        matplotlib.axes.Axes.plot = original
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # the mean over the two seeds (seed adds 1 or 2) at the first and the last update
+    assert drawn == [("minippo, 2 seeds", 2048.0, 101.5, 501.5), ("SB3, 2 seeds", 2048.0, 51.5, 251.5)]
+    assert summary.plot_peers([], runs, tmp_path / "none.png") is None and not (tmp_path / "none.png").exists()
+
+
 # the runner: runs, rows, settings
 
 
