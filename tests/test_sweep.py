@@ -207,6 +207,13 @@ def stop_session(process: subprocess.Popen, grace: float = 10.0) -> None:
         process.wait(timeout=10)
 
 
+def as_a_terminal_job() -> None:
+    """In the child before it starts: Ctrl-C as a shell leaves it for a job it starts, whatever the test process
+    inherited or set (the default action, not blocked), so that the sweep's own handling is what is tested."""
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def ctrl_c_until_it_stops(process: subprocess.Popen, csv_path: Path, presses: int = 3) -> int:
     """Ctrl-C to the process's whole group, as a terminal sends it, then wait (up to a minute) for the process to end.
     A user who sees the sweep train on after a Ctrl-C presses it again; so does this, at most ``presses`` times. One
@@ -228,7 +235,11 @@ def test_ctrl_c_keeps_finished_runs_and_the_same_command_resumes(tmp_path):
     # eight runs of a few seconds each, one at a time: after the first finishes, the Ctrl-C lands well before the last
     argv = [sys.executable, "-m", "minippo", "sweep", "CartPole-v1", "--seeds", "1-8", "--steps", "49152"]
     argv += ["--out", str(out), "--workers", "1", "--quiet"]
-    first = subprocess.Popen(argv, cwd=tmp_path, start_new_session=True, stderr=subprocess.PIPE, text=True)
+    blocked = signal.pthread_sigmask(signal.SIG_BLOCK, [])
+    inherited = f"SIGINT in the test process: {signal.getsignal(signal.SIGINT)}, blocked signals: {blocked}"
+    first = subprocess.Popen(
+        argv, cwd=tmp_path, start_new_session=True, stderr=subprocess.PIPE, text=True, preexec_fn=as_a_terminal_job
+    )
     try:
         deadline = time.monotonic() + 90
         while not (out / "sweep.csv").exists() and time.monotonic() < deadline and first.poll() is None:
@@ -243,7 +254,7 @@ def test_ctrl_c_keeps_finished_runs_and_the_same_command_resumes(tmp_path):
         left = session_processes(first.pid)  # the workers, and the local Ray with them, have stopped
     finally:
         stop_session(first)
-    assert first.returncode == 130, stderr
+    assert first.returncode == 130, f"{stderr} ({presses} Ctrl-C presses; {inherited})"
     if presses > 1:  # seen on a loaded machine: the sweep went on training after a Ctrl-C, as if it was never sent
         warnings.warn(f"the sweep needed {presses} Ctrl-C presses to stop", stacklevel=1)
     assert not left, [Path(f"/proc/{pid}/cmdline").read_bytes()[:100] for pid in left]
