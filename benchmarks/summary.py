@@ -920,13 +920,35 @@ def progress_curves(folder) -> tuple[list[float], list[float]] | None:
     return [p[0] for p in points], [p[1] for p in points]
 
 
+def draw_seed_band(ax, curves, colour, label: str, alpha: float) -> None:
+    """On ``ax``: the mean over seeds of (steps, returns) curves, on the steps all of them cover, and the band from the
+    lowest to the highest seed."""
+    import numpy as np
+
+    grid = np.linspace(max(steps[0] for steps, _ in curves), min(steps[-1] for steps, _ in curves), 200)
+    values = np.array([np.interp(grid, steps, returns) for steps, returns in curves])
+    ax.fill_between(grid, values.min(axis=0), values.max(axis=0), color=colour, alpha=alpha, lw=0)
+    ax.plot(grid, values.mean(axis=0), color=colour, lw=2, label=label)
+
+
+def save_return_figure(fig, out) -> Path:
+    """Label the shared axes of a figure of returns against steps, write it to ``out`` and close it."""
+    import matplotlib.pyplot as plt
+
+    fig.supxlabel("environment steps", fontsize=9)
+    fig.supylabel("mean return, last 100 episodes", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(out)
+    plt.close(fig)
+    return Path(out)
+
+
 def plot_mujoco(rows: list[dict], runs_root, out) -> Path | None:
     """Seven panels: the mean over seeds of the last-100-episode return, the min–max band over seeds, the paper."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import numpy as np
 
     from minippo.plotting import INK, ORANGE
 
@@ -945,11 +967,7 @@ def plot_mujoco(rows: list[dict], runs_root, out) -> Path | None:
                     curves.append(curve)
         if not curves:
             continue
-        end = min(curve[0][-1] for curve in curves)
-        grid = np.linspace(max(curve[0][0] for curve in curves), end, 200)
-        values = np.array([np.interp(grid, steps, returns) for steps, returns in curves])
-        ax.fill_between(grid, values.min(axis=0), values.max(axis=0), color=ORANGE, alpha=0.25, lw=0)
-        ax.plot(grid, values.mean(axis=0), color=ORANGE, lw=2, label=f"minippo, {len(curves)} seeds")
+        draw_seed_band(ax, curves, ORANGE, f"minippo, {len(curves)} seeds", alpha=0.25)
         low, high = PAPER[env_id]
         if high > low:
             ax.axhspan(low, high, color=INK, alpha=0.15)
@@ -960,12 +978,7 @@ def plot_mujoco(rows: list[dict], runs_root, out) -> Path | None:
     for ax in axes[len(envs) :]:
         ax.axis("off")
     axes[0].legend(frameon=False, fontsize=8)
-    fig.supxlabel("environment steps", fontsize=9)
-    fig.supylabel("mean return, last 100 episodes", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(out)
-    plt.close(fig)
-    return Path(out)
+    return save_return_figure(fig, out)
 
 
 def plot_peers(rows: list[dict], runs_root, out) -> Path | None:
@@ -982,7 +995,6 @@ def plot_peers(rows: list[dict], runs_root, out) -> Path | None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import numpy as np
 
     from minippo.plotting import ORANGE, SAGE
 
@@ -995,27 +1007,13 @@ def plot_peers(rows: list[dict], runs_root, out) -> Path | None:
             curves = [curve for curve in curves if curve]
             if not curves:
                 continue
-            grid = np.linspace(max(c[0][0] for c in curves), min(c[0][-1] for c in curves), 200)
-            values = np.array([np.interp(grid, steps, returns) for steps, returns in curves])
-            colour = colours[library]
-            ax.fill_between(grid, values.min(axis=0), values.max(axis=0), color=colour, alpha=0.2, lw=0)
-            ax.plot(
-                grid,
-                values.mean(axis=0),
-                color=colour,
-                lw=2,
-                label=f"{name}, {len(curves)} seed{'s' if len(curves) != 1 else ''}",
-            )
+            label = f"{name}, {len(curves)} seed{'s' if len(curves) != 1 else ''}"
+            draw_seed_band(ax, curves, colours[library], label, alpha=0.2)
         ax.set_title(task, fontsize=10)
         ax.grid(alpha=0.3)
         ax.ticklabel_format(axis="x", style="sci", scilimits=(0, 0))
         ax.legend(frameon=False, fontsize=8, loc="upper left")
-    fig.supxlabel("environment steps", fontsize=9)
-    fig.supylabel("mean return, last 100 episodes", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(out)
-    plt.close(fig)
-    return Path(out)
+    return save_return_figure(fig, out)
 
 
 def plot_table1(table: list[dict], out, label: str = "minippo (reduced scale)") -> Path | None:
