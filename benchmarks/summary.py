@@ -141,11 +141,11 @@ def scored_text(score: dict) -> str:
     return score_text({"score": score["score"], "score_se": score["se"]})
 
 
-def stale_settings(runs_csv: str, table: list[dict]) -> list[str]:
+def stale_settings(runs_csv: str, table: list[dict], results=records.RESULTS) -> list[str]:
     """Settings whose runs in ``runs_csv`` were made by code later found wrong (kept under results/stale/) and that the
     table does not score yet: they are being rerun."""
     scored = {row["setting"] for row in table}
-    stale = {row["setting"] for row in records.read_rows(records.RESULTS / "stale" / runs_csv)}
+    stale = {row["setting"] for row in records.read_rows(Path(results) / "stale" / runs_csv)}
     return [name for name, _, _ in TABLE1_SETTINGS if name in stale and name not in scored]
 
 
@@ -191,13 +191,18 @@ def table1_verdict(table: list[dict], pending: list[str] = ()) -> str:
             f"the paper's ordering {verdict}"
         )
     if pending:
-        text += (
-            f" Not shown: {len(pending)} KL-penalty setting{'' if len(pending) == 1 else 's'} ({', '.join(pending)}), "
-            "being rerun after a fix to the "
-            "penalty, which had compared the new policy with the old policy's means but the current σ; the earlier "
-            "runs are kept in `benchmarks/results/stale/` and not scored."
-        )
+        text += " " + pending_text(pending)
     return text
+
+
+def pending_text(pending: list[str]) -> str:
+    """The sentence that names the settings being rerun (``stale_settings``), so that nobody reads a table as
+    complete."""
+    return (
+        f"Not shown: {len(pending)} KL-penalty setting{'' if len(pending) == 1 else 's'} ({', '.join(pending)}), "
+        "being rerun after a fix to the penalty, which had compared the new policy with the old policy's means but "
+        "the current σ; the earlier runs are kept in `benchmarks/results/stale/` and not scored."
+    )
 
 
 def table1_lines(table: list[dict], randoms: list[dict], pending: list[str] = ()) -> list[str]:
@@ -638,6 +643,7 @@ def implementation_block(results, default_runs: list[dict], randoms: list[dict])
     compared = implementation_scores(default_runs, other, randoms)
     if not compared:
         return []
+    pending = stale_settings("table1_1m_paperimpl_runs.csv", [{"setting": name} for name in compared], results)
     which = "All of these settings" if len(compared) == len(TABLE1_PAPER) else "Some of these settings"
     return [
         f"{which} again, as the paper describes them: `--config "
@@ -647,6 +653,7 @@ def implementation_block(results, default_runs: list[dict], randoms: list[dict])
         "(`benchmarks/results/table1_1m_paperimpl_runs.csv`):",
         "",
         *implementation_lines(compared),
+        *(["", pending_text(pending)] if pending else []),
     ]
 
 

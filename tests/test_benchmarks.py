@@ -615,6 +615,28 @@ def test_one_detail_table_puts_each_detail_between_all_on_and_all_off(tmp_path):
     assert lines[2:] == ["| IP | 150 (2) | — | 950 (2) | — | 1000 (1) |"]  # only the tasks run one detail at a time
 
 
+def test_three_details_block_names_its_settings_being_rerun(tmp_path):
+    clip, beta, adaptive = "Clipping, ε = 0.2", "Fixed KL, β = 3", "Adaptive KL, d_targ = 0.01"
+
+    def other(name, seed, value):  # a run of the three-details record, with its command's overrides
+        return {**table1_run(name, "Hopper-v5", seed, value), "command": "minippo train --config scale_rewards=false"}
+
+    default = [table1_run(name, "Hopper-v5", seed, 50 + seed) for name in (clip, beta, adaptive) for seed in (1, 2)]
+    randoms = random_rows(["Hopper-v5"])
+    write_csv(tmp_path / "table1_1m_paperimpl_runs.csv", [other(clip, s, 40) for s in (1, 2)])
+    (tmp_path / "stale").mkdir()
+    write_csv(
+        tmp_path / "stale" / "table1_1m_paperimpl_runs.csv", [other(n, s, 70) for n in (beta, adaptive) for s in (1, 2)]
+    )
+    block = summary.implementation_block(tmp_path, default, randoms)
+    assert block[-1].startswith(f"Not shown: 2 KL-penalty settings ({adaptive}, {beta}), being rerun")
+    rerun = [other(beta, s, 60) for s in (1, 2)]  # β = 3 rerun: scored, and no longer named
+    write_csv(tmp_path / "table1_1m_paperimpl_runs.csv", [other(clip, s, 40) for s in (1, 2)] + rerun)
+    block = summary.implementation_block(tmp_path, default, randoms)
+    assert any(line.startswith(f"| {beta} |") for line in block)
+    assert block[-1].startswith(f"Not shown: 1 KL-penalty setting ({adaptive}), being rerun")
+
+
 def test_table1_names_the_settings_being_rerun():
     table = [{"setting": "Clipping, ε = 0.2", "score": 0.8}, {"setting": "No clipping or penalty", "score": -0.4}]
     pending = ["Fixed KL, β = 3", "Adaptive KL, d_targ = 0.01"]
