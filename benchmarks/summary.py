@@ -617,7 +617,10 @@ def implementation_lines(compared: dict) -> list[str]:
         ranks = []
         for column, label in ((0, "with minippo's defaults"), (1, "as the paper describes it")):
             ranked = sorted(compared, key=lambda setting: -compared[setting][column]["score"])
-            leader = "" if ranked[0] == clip else f", behind {ranked[0]}"
+            ahead = [f"{setting} ({compared[setting][column]['score']:.2f})" for setting in ranked[:ranked.index(clip)]]
+            if len(ahead) > 1:
+                ahead = [", ".join(ahead[:-1]), ahead[-1]]
+            leader = f", behind {' and '.join(ahead)}" if ahead else ""
             ranks.append(f"{ranked.index(clip) + 1} of {len(compared)} {label}{leader}")
         lines += ["", f"Among these settings {clip} ranks " + "; ".join(ranks) + "."]
         leader = leader_sentence({setting: other["per_task"] for setting, (_, other) in compared.items()})

@@ -544,9 +544,14 @@ def test_two_implementations_are_scored_on_one_scale_over_complete_tasks():
     assert summary.implementation_lines(whole)[0].startswith("All of Table 1's 11 settings,")
     assert lines[4] == "| Clipping, ε = 0.2 | 0.40 ± 0.10 | 0.60 ± 0.10 | 0.82 |"
     assert lines[-1] == (
-        "Among these settings Clipping, ε = 0.2 ranks 2 of 2 with minippo's defaults, behind Fixed KL, β = 3; "
+        "Among these settings Clipping, ε = 0.2 ranks 2 of 2 with minippo's defaults, behind Fixed KL, β = 3 (0.70); "
         "1 of 2 as the paper describes it."
     )  # ε = 0.2 leads as the paper describes it, so no task-by-task sentence follows
+    third = {**compared, **{name: compared[beta] for name in ("Clipping, ε = 0.3", "Fixed KL, β = 1")}}
+    assert summary.implementation_lines(third)[-1] == (  # every setting ahead of ε = 0.2 is named, with its score
+        "Among these settings Clipping, ε = 0.2 ranks 4 of 4 with minippo's defaults, behind Fixed KL, β = 3 (0.70), "
+        "Clipping, ε = 0.3 (0.70) and Fixed KL, β = 1 (0.70); 1 of 4 as the paper describes it."
+    )
     behind = {**compared, beta: (compared[beta][0], {**compared[beta][1], "per_task": {"Hopper-v5": 0.9}})}
     assert summary.implementation_lines(behind)[-1] == (
         "As the paper describes it: task by task, against Clipping, ε = 0.2, Fixed KL, β = 3 scores higher on 1 "
