@@ -617,11 +617,12 @@ def implementation_lines(compared: dict) -> list[str]:
         ranks = []
         for column, label in ((0, "with minippo's defaults"), (1, "as the paper describes it")):
             ranked = sorted(compared, key=lambda setting: -compared[setting][column]["score"])
-            ahead = [f"{setting} ({compared[setting][column]['score']:.2f})" for setting in ranked[:ranked.index(clip)]]
+            rank = ranked.index(clip)
+            ahead = [f"{setting} ({compared[setting][column]['score']:.2f})" for setting in ranked[:rank]]
             if len(ahead) > 1:
                 ahead = [", ".join(ahead[:-1]), ahead[-1]]
             leader = f", behind {' and '.join(ahead)}" if ahead else ""
-            ranks.append(f"{ranked.index(clip) + 1} of {len(compared)} {label}{leader}")
+            ranks.append(f"{rank + 1} of {len(compared)} {label}{leader}")
         lines += ["", f"Among these settings {clip} ranks " + "; ".join(ranks) + "."]
         leader = leader_sentence({setting: other["per_task"] for setting, (_, other) in compared.items()})
         lines += ["", f"As the paper describes it: {leader[0].lower()}{leader[1:]}"] if leader else []
