@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
-import difflib
 import json
 import sys
 from pathlib import Path
 
-from minippo.errors import MinippoError, NonFiniteError
+from minippo.errors import ConfigError, MinippoError, NonFiniteError
+from minippo.ppo import OBJECTIVES, Config
 
 RUN_FILES = ("config.json", "progress.csv", "policy.npz", "checkpoint.npz", "curve.png")
 
@@ -23,6 +22,11 @@ class HelpWithDefaults(argparse.HelpFormatter):
         if not unsaid and action.default is not argparse.SUPPRESS and "%(default)" not in text:
             text += " (default: %(default)s)"
         return text
+
+    def _fill_text(self, text, width, indent):  # a text of several lines (the list of Config fields) keeps them
+        if "\n" in text:
+            return "".join(indent + line for line in text.splitlines(keepends=True))
+        return super()._fill_text(text, width, indent)
 
 
 class Parser(argparse.ArgumentParser):
@@ -47,41 +51,29 @@ def steps_notice(config) -> str | None:
     )
 
 
-def parse_override(text: str, fields: dict):
-    """'key=value' → (key, value typed like the Config field)."""
-    if "=" not in text:
-        raise MinippoError(f"--config takes key=value, not '{text}'")
-    key, raw = text.split("=", 1)
-    key = key.strip().replace("-", "_")
-    if key not in fields:
-        close = difflib.get_close_matches(key, list(fields), n=3)
-        hint = f"; did you mean {', '.join(close)}?" if close else ""
-        raise MinippoError(f"unknown config field '{key}'{hint}")
-    default = fields[key]
-    raw = raw.strip()
-    try:
-        if raw.lower() == "none":
-            return key, None
-        if isinstance(default, bool):
-            if raw.lower() not in ("true", "false", "1", "0", "yes", "no", "on", "off"):
-                raise ValueError
-            return key, raw.lower() in ("true", "1", "yes", "on")
-        if isinstance(default, int):
-            return key, int(float(raw)) if float(raw).is_integer() else int(raw)
-        if isinstance(default, float) or default is None:
-            return key, float(raw)
-        if isinstance(default, tuple):
-            return key, tuple(int(x) for x in raw.split(",") if x)
-        return key, raw
-    except ValueError:
-        raise MinippoError(f"--config {key}: cannot read '{raw}' as {type(default).__name__}")
+FLAGS = {"env_id": "ENV", "total_steps": "--steps", "seed": "--seed", "objective": "--objective"}
+
+
+def config_from_args(args) -> Config:
+    """The Config of ``minippo train`` (and of a sweep's runs): ENV, --steps, --seed, --objective, --config."""
+    config = Config(env_id=args.env_id, total_steps=args.steps, seed=args.seed, objective=args.objective)
+    return config.with_overrides(args.config)
+
+
+def config_help() -> str:
+    """Every Config field with its default and its comment in minippo/ppo.py, for ``--help``."""
+    lines = ["Config fields for --config KEY=VALUE (default, then meaning):"]
+    for name, (default, comment) in Config.field_help().items():
+        if name not in FLAGS:
+            shown = ",".join(map(str, default)) if isinstance(default, tuple) else default
+            lines.append(f"  {name}={shown}  {comment}")
+    return "\n".join(lines)
 
 
 def cmd_train(args) -> int:
-    from minippo.ppo import Config, train
+    from minippo.ppo import train
 
     out = Path(args.out)
-    defaults = {f.name: getattr(Config(), f.name) for f in dataclasses.fields(Config)}
     if args.resume:
         if not (out / "checkpoint.npz").exists():
             raise MinippoError(f"--resume: no checkpoint in {out}")
@@ -97,12 +89,9 @@ def cmd_train(args) -> int:
                 raise MinippoError(f"{out} exists and is not empty; pass --force to overwrite or --resume to continue")
             for name in RUN_FILES:
                 (out / name).unlink(missing_ok=True)
-        overrides = dict(parse_override(text, defaults) for text in args.config)
         if args.steps is None:
             raise MinippoError("--steps is required")
-        config = Config(
-            env_id=args.env_id, total_steps=args.steps, seed=args.seed, objective=args.objective, **overrides
-        )
+        config = config_from_args(args)
     config.validate()
     from minippo.envs import make_env
 
@@ -190,6 +179,9 @@ def cmd_sweep(args) -> int:
     if len(set(args.env_ids)) != len(args.env_ids):
         raise MinippoError("a task is named twice")
     seeds, grid = sweep.parse_seeds(args.seeds), sweep.parse_grid(args.grid)
+    for key, _ in grid:
+        if key in ("env_id", "seed", "total_steps"):
+            raise MinippoError(f"--grid {key}: give the tasks, --seeds and --steps instead")
     runs = sweep.plan(args.env_ids, seeds, args.steps, grid, args.objective, args.config)
     from minippo.envs import make_env
 
@@ -236,6 +228,8 @@ def build_parser() -> Parser:
         help="train PPO on a Gymnasium environment",
         description="Train PPO (Algorithm 1 with the paper's MuJoCo settings) and write the run folder: config.json, "
         "progress.csv (one row per update), policy.npz, checkpoint.npz and curve.png.",
+        epilog=config_help(),
+        formatter_class=lambda prog: HelpWithDefaults(prog, width=120),
     )
     p.add_argument("env_id", help="a Gymnasium id with flat Box observations, e.g. CartPole-v1 or Hopper-v5")
     p.add_argument(
@@ -246,8 +240,7 @@ def build_parser() -> Parser:
     )
     p.add_argument("--seed", type=int, default=1, help="seeds the networks, the sampling and the environments")
     p.add_argument("--out", required=True, help="the run folder to write (created if missing)")
-    p.add_argument("--objective", choices=["clip", "cpi", "klpen", "pg"], default="clip",
-                   help="the surrogate: L^CLIP (eq. 7), L^CPI (eq. 6), the KL penalty (eq. 8) or L^PG")  # fmt: skip
+    p.add_argument("--objective", choices=OBJECTIVES, default="clip", help=Config.field_help()["objective"][1])
     p.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE",
                    help="override any field of minippo.Config, e.g. horizon=512 entropy_coef=0.01")  # fmt: skip
     p.add_argument("--force", action="store_true", help="overwrite the run files in an existing --out")
@@ -280,7 +273,7 @@ def build_parser() -> Parser:
     p.add_argument("--seeds", default="1", help="seeds: 1-3, 1,4,7 (default 1)")
     p.add_argument("--steps", type=int, help="environment steps per run (required)")
     p.add_argument("--grid", action="append", default=[], metavar="KEY=V1,V2", help="a Config field and its values")
-    p.add_argument("--objective", choices=["clip", "cpi", "klpen", "pg"], default="clip")
+    p.add_argument("--objective", choices=OBJECTIVES, default="clip", help=Config.field_help()["objective"][1])
     p.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE", help="override Config fields in every run")
     p.add_argument("--out", required=True, help="the folder of run folders (and of sweep.csv)")
     p.add_argument("--csv", help="the sweep's CSV (default OUT/sweep.csv)")
@@ -305,6 +298,15 @@ def main(argv=None) -> int:
     try:
         args = build_parser().parse_args(argv)
         return args.func(args)
+    except ConfigError as error:  # a field's message, in the words of the option that set it
+        message = str(error)
+        flag = FLAGS.get(error.field)
+        if flag is not None and message.startswith(error.field):
+            message = flag + message[len(error.field) :]
+        elif error.field and message.startswith(error.field):
+            message = f"--config {message}"
+        print(f"minippo: error: {message}", file=sys.stderr)
+        return 2
     except MinippoError as error:
         print(f"minippo: error: {error}", file=sys.stderr)
         return 2

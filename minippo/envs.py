@@ -10,9 +10,6 @@ import numpy as np
 
 from minippo.errors import MinippoError
 
-os.environ.setdefault("MUJOCO_GL", "egl")  # offscreen rendering for --gif, on machines without a display
-os.environ.setdefault("SDL_VIDEODRIVER", "dummy")  # the same for pygame's renderer (CartPole and the classic tasks)
-
 
 def check_env_id(env_id: str) -> None:
     if env_id in gym.registry:
@@ -43,6 +40,9 @@ def spaces_of(env: gym.Env) -> tuple[int, str, int]:
 def make_env(env_id: str, render_mode: str | None = None, size: int | None = None) -> gym.Env:
     """Make ``env_id`` (checking its spaces); ``size`` sets a MuJoCo task's rendered frame to size × size pixels."""
     check_env_id(env_id)
+    if render_mode is not None:  # offscreen rendering (--gif) on machines without a display, unless the user chose
+        os.environ.setdefault("MUJOCO_GL", "egl")  # MuJoCo's renderer
+        os.environ.setdefault("SDL_VIDEODRIVER", "dummy")  # pygame's (CartPole and the other classic tasks)
     try:
         extra = {} if render_mode is None else {"render_mode": render_mode}
         if size is not None and "mujoco" in str(gym.spec(env_id).entry_point):

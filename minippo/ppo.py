@@ -14,20 +14,25 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import difflib
+import inspect
+import io
 import json
 import math
 import os
 import time
-from dataclasses import dataclass, field
+import tokenize
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from minippo import advantages as adv
 from minippo import losses
 from minippo.agent import ActorCritic, save_policy
 from minippo.envs import make_env, spaces_of
-from minippo.errors import MinippoError, NonFiniteError
+from minippo.errors import ConfigError, MinippoError, NonFiniteError
 from minippo.normalization import ObservationNormalizer, RewardScaler
 from minippo.optimizer import Adam, clip_grad_norm, linear_schedule
 from minippo.rollout import Rollout
@@ -77,7 +82,7 @@ class Config:
     entropy_coef: float = 0.0  # c2 (the paper uses none for MuJoCo)
     shared_network: bool = False  # one tanh trunk, a policy head and a value head
     hidden_sizes: tuple = (64, 64)  # two tanh layers of 64, for the policy and for the value network
-    dtype: str = "float32"  # the networks' floats; float32 halves the cost of tanh and matmul (tests use float64)
+    dtype: str = "float32"  # the networks' floats: float32 or float64 (the gradient checks use float64)
     log_std_init: float = 0.0  # the Gaussian policy starts with σ = e^0 = 1 for every action
     # the implementation details, each a switch
     lr: float = 3e-4  # Adam step size α (the paper's Table 3)
@@ -97,7 +102,6 @@ class Config:
     clip_actions: bool = True  # clip to the action bounds when stepping; the unclipped action is stored
     target_kl: float | None = None  # stop the epochs early once approx KL exceeds this (off in the paper)
     checkpoint_every: int = 10  # updates between checkpoints (for --resume and for NaN recovery)
-    extra: dict = field(default_factory=dict)  # free-form notes stored in config.json
 
     @property
     def batch_size(self) -> int:
@@ -108,22 +112,80 @@ class Config:
         return max(1, self.total_steps // self.batch_size)
 
     def validate(self) -> Config:
-        if self.objective not in OBJECTIVES:
-            raise MinippoError(f"unknown objective '{self.objective}'; choose one of {', '.join(OBJECTIVES)}")
-        if not 0 < self.total_steps <= 10**10:
-            raise MinippoError(f"--steps must be between 1 and 10^10, not {self.total_steps}")
+        """The same Config, or a ConfigError that names the field at fault."""
+
+        def check(ok: bool, name: str, message: str) -> None:
+            if not ok:
+                raise ConfigError(name, f"{name} {message}")
+
+        choices = ", ".join(OBJECTIVES)
+        check(self.objective in OBJECTIVES, "objective", f"must be one of {choices}, not '{self.objective}'")
+        check(0 < self.total_steps <= 10**10, "total_steps", f"must be between 1 and 10^10, not {self.total_steps}")
         for name in ("num_envs", "horizon", "epochs", "minibatch_size"):
-            if getattr(self, name) < 1:
-                raise MinippoError(f"{name} must be a positive integer, not {getattr(self, name)}")
-        if self.minibatch_size > self.batch_size:
-            raise MinippoError(f"minibatch_size {self.minibatch_size} exceeds the batch N·T = {self.batch_size}")
-        if not (0 <= self.gamma <= 1 and 0 <= self.gae_lambda <= 1):
-            raise MinippoError("gamma and gae_lambda must lie in [0, 1]")
-        if self.dtype not in ("float32", "float64"):
-            raise MinippoError(f"dtype must be float32 or float64, not {self.dtype}")
-        if not self.clip_epsilon > 0 or not self.lr > 0:
-            raise MinippoError("clip_epsilon and lr must be positive")
+            check(getattr(self, name) >= 1, name, f"must be a positive integer, not {getattr(self, name)}")
+        check(self.minibatch_size <= self.batch_size, "minibatch_size",
+              f"{self.minibatch_size} exceeds the batch N·T = {self.batch_size}")  # fmt: skip
+        for name in ("gamma", "gae_lambda"):
+            check(0 <= getattr(self, name) <= 1, name, f"must lie in [0, 1], not {getattr(self, name)}")
+        check(self.dtype in ("float32", "float64"), "dtype", f"must be float32 or float64, not {self.dtype}")
+        for name in ("clip_epsilon", "lr"):
+            check(getattr(self, name) > 0, name, f"must be positive, not {getattr(self, name)}")
         return self
+
+    @classmethod
+    def field_help(cls) -> dict[str, tuple[object, str]]:
+        """{field: (default, the comment beside it in this class)}: the one description of every setting, which the
+        command line's help is built from."""
+        comments = {}
+        tokens = tokenize.generate_tokens(io.StringIO(inspect.getsource(cls)).readline)
+        name = None
+        for token in tokens:
+            if token.type == tokenize.NAME and token.start[1] == 4 and name is None:
+                name = token.string
+            elif token.type == tokenize.COMMENT and name is not None:
+                comments[name] = token.string.lstrip("# ")
+            if token.type in (tokenize.NEWLINE, tokenize.NL):
+                name = None
+        defaults = cls()
+        return {f.name: (getattr(defaults, f.name), comments.get(f.name, "")) for f in dataclasses.fields(cls)}
+
+    @classmethod
+    def parse_value(cls, name: str, text: str):
+        """A field's value from its text ('3e-4', 'false', '64,64', 'none'), typed like the field's default."""
+        name = name.strip().replace("-", "_")
+        defaults = {f.name: getattr(cls(), f.name) for f in dataclasses.fields(cls)}
+        if name not in defaults:
+            close = difflib.get_close_matches(name, list(defaults), n=3)
+            hint = f"; did you mean {', '.join(close)}?" if close else ""
+            raise ConfigError(name, f"unknown config field '{name}'{hint}")
+        default, raw = defaults[name], text.strip()
+        try:
+            if raw.lower() == "none":
+                return None
+            if isinstance(default, bool):
+                if raw.lower() not in ("true", "false", "1", "0", "yes", "no", "on", "off"):
+                    raise ValueError
+                return raw.lower() in ("true", "1", "yes", "on")
+            if isinstance(default, int):
+                return int(float(raw)) if float(raw).is_integer() else int(raw)
+            if isinstance(default, float) or default is None:
+                return float(raw)
+            if isinstance(default, tuple):
+                return tuple(int(x) for x in raw.split(",") if x)
+            return raw
+        except ValueError:
+            raise ConfigError(name, f"{name}: cannot read '{raw}' as {type(default).__name__}") from None
+
+    def with_overrides(self, texts) -> Config:
+        """A copy with 'key=value' overrides (``minippo train --config``), each value typed like its field."""
+        changes = {}
+        for text in texts:
+            if "=" not in text:
+                raise ConfigError("", f"an override is key=value, not '{text}'")
+            key, raw = text.split("=", 1)
+            key = key.strip().replace("-", "_")
+            changes[key] = self.parse_value(key, raw)
+        return dataclasses.replace(self, **changes)
 
     def to_dict(self) -> dict:
         data = dataclasses.asdict(self)
@@ -133,6 +195,7 @@ class Config:
     @classmethod
     def from_dict(cls, data: dict) -> Config:
         known = {f.name for f in dataclasses.fields(cls)}
+        data = {key: value for key, value in data.items() if key != "extra" or value}  # an empty field of old runs
         unknown = set(data) - known
         if unknown:
             raise MinippoError(f"unknown config field(s): {', '.join(sorted(unknown))}")
@@ -273,6 +336,7 @@ class Trainer:
         self.update = 0
         self.wall_s = 0.0
 
+    @threadpool_limits.wrap(limits=1, user_api="blas")  # 64 × 64 matrices: a second BLAS thread would only wait
     def run_update(self) -> dict:
         """One iteration of Algorithm 1."""
         config, agent = self.config, self.agent

@@ -26,32 +26,29 @@ A run that fails (an exception, or NaN/inf in the loss: ``NonFiniteError``) is t
 times, then recorded with status ``failed`` and its reason, and the sweep goes on; a later invocation tries it again.
 Ctrl-C records the runs already finished, stops the workers, and exits with 130.
 
-Ray is an optional dependency (``pip install -e ".[sweep]"``); nothing else in minippo imports it. The benchmark
-runners (benchmarks/seven_tasks.py, benchmarks/table1.py) build their runs as ``Run`` and hand them to ``Sweep`` with
-a ``Record``, the CSV of their own columns.
+Ray is an optional dependency (``pip install -e ".[sweep]"``); nothing else in minippo imports it. ``plan`` makes the
+runs, ``Sweep`` records them, and ``execute`` is the engine under both: it runs any function called as ``train_run``
+is (a Config's dict in, a dict with the run's files and last progress row out) on Ray, with retries and Ctrl-C.
 """
 
 from __future__ import annotations
 
-import csv
-import dataclasses
 import itertools
 import math
 import os
 import shlex
 import signal
 import socket
-import subprocess
 import sys
 import tempfile
 import threading
-import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from minippo.errors import MinippoError
 from minippo.ppo import Config
+from minippo.records import append_row, check_columns, commit_of_code, read_rows
 
 RESULT_FIELDS = [
     "steps",
@@ -72,15 +69,12 @@ LOOPBACK = ("127.0.0.1", "localhost", "::1")
 @dataclass
 class Run:
     """One training of a sweep: its folder name, its Config, the CSV columns that name it (``labels``) and the
-    ``minippo train`` options that make the same training alone (``options``, after ENV --steps --seed --out).
-    ``task``: the function its Ray task runs instead of ``train_run``, called the same way and returning the same
-    kind of result (the benchmarks' side-by-side runner trains another library's PPO with it)."""
+    ``minippo train`` options that make the same training alone (``options``, after ENV --steps --seed --out)."""
 
     name: str
     config: Config
     labels: dict
     options: list = field(default_factory=list)
-    task: object = None
 
     def key(self) -> tuple:
         return tuple(str(value) for value in self.labels.values())
@@ -114,33 +108,22 @@ def parse_seeds(text: str) -> list[int]:
     return seeds
 
 
-def config_fields() -> dict:
-    return {f.name: getattr(Config(), f.name) for f in dataclasses.fields(Config) if f.name != "extra"}
-
-
 def parse_grid(texts: list[str]) -> list[tuple[str, list]]:
     """['clip_epsilon=0.1,0.2', 'lr=3e-4,1e-3'] -> [('clip_epsilon', [0.1, 0.2]), ('lr', [0.0003, 0.001])], each
     value typed like its Config field. A tuple field's values put x between their numbers (hidden_sizes=32x32,64)."""
-    from minippo.cli import parse_override
-
-    fields, grid = config_fields(), []
+    grid = []
     for text in texts:
         if "=" not in text:
             raise MinippoError(f"--grid takes key=value1,value2,..., not '{text}'")
         key, raw = text.split("=", 1)
         key = key.strip().replace("-", "_")
-        if key in ("env_id", "seed", "total_steps"):
-            raise MinippoError(f"--grid {key}: give the tasks, --seeds and --steps instead")
-        if key not in fields:
-            parse_override(f"{key}=0", fields)  # raises the unknown-field error, with its suggestions
         if any(key == other for other, _ in grid):
             raise MinippoError(f"--grid {key} is given twice")
         words = [word.strip() for word in raw.split(",") if word.strip()]
         if not words:
             raise MinippoError(f"--grid {key}: no values")
-        if isinstance(fields[key], tuple):
-            words = [word.replace("x", ",") for word in words]
-        values = [parse_override(f"{key}={word}", fields)[1] for word in words]
+        tuple_field = isinstance(Config.field_help().get(key, (None,))[0], tuple)
+        values = [Config.parse_value(key, word.replace("x", ",") if tuple_field else word) for word in words]
         if len(set(map(repr, values))) != len(values):
             raise MinippoError(f"--grid {key} names a value twice")
         grid.append((key, values))
@@ -152,16 +135,15 @@ def plan(envs, seeds, steps, grid=(), objective="clip", overrides=()) -> list[Ru
 
     ``grid``: [(Config field, [values])] from ``parse_grid``, every combination; ``overrides``: 'key=value' texts
     for every run (as ``minippo train --config``)."""
-    from minippo.cli import parse_override
-
-    base = dict(parse_override(text, config_fields()) for text in overrides)
+    fixed = Config().with_overrides(overrides)
+    base = {text.split("=", 1)[0].strip().replace("-", "_") for text in overrides}
     for key, _ in grid:
         if key in base or (key == "objective" and objective != "clip"):
             raise MinippoError(f"{key} is both swept (--grid) and fixed (--config or --objective)")
     runs = []
     for env_id in envs:
         for point in itertools.product(*[[(key, value) for value in values] for key, values in grid]):
-            settings = {**base, **dict(point)}
+            settings = {**{key: getattr(fixed, key) for key in base}, **dict(point)}
             run_objective = settings.pop("objective", objective)
             options = ["--objective", run_objective] if run_objective != "clip" else []
             pairs = [f"{key}={text(value)}" for key, value in settings.items()]
@@ -214,56 +196,6 @@ def train_run(config_dict: dict, name: str = "", board=None) -> dict:
 # the driver: CSV, run folders, progress
 
 
-def commit_of_code() -> str:
-    """The short commit of the minippo that runs the sweep, with +dirty when minippo/ has uncommitted edits;
-    'unknown' outside a git checkout."""
-    root = Path(__file__).resolve().parent.parent
-    try:
-        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True)
-        status = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no", "--", "minippo"],
-            cwd=root,
-            capture_output=True,
-            text=True,
-        )
-    except OSError:
-        return "unknown"
-    if head.returncode != 0:
-        return "unknown"
-    return head.stdout.strip() + ("+dirty" if status.stdout.strip() else "")
-
-
-def read_rows(path) -> list[dict]:
-    path = Path(path)
-    if not path.exists() or path.stat().st_size == 0:
-        return []
-    with open(path, newline="") as handle:
-        return list(csv.DictReader(handle))
-
-
-def append_row(path, fields: list[str], row: dict) -> None:
-    """Append one row (the header first if the file is new), flushed to disk before returning."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    new = not path.exists() or path.stat().st_size == 0
-    with open(path, "a", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=fields, lineterminator="\n")
-        if new:
-            writer.writeheader()
-        writer.writerow({key: row.get(key, "") for key in fields})
-        handle.flush()
-        os.fsync(handle.fileno())
-
-
-def check_columns(path, fields: list[str]) -> None:
-    path = Path(path)
-    if path.exists() and path.stat().st_size:
-        with open(path, newline="") as handle:
-            header = next(csv.reader(handle), [])
-        if header != fields:
-            raise MinippoError(f"{path} has columns {','.join(header)}; this sweep writes {','.join(fields)}")
-
-
 def write_run(folder: Path, result: dict, title: str) -> None:
     """The run's files as the task returned them, then its curve.png as ``minippo train`` draws it."""
     from minippo.plotting import plot_runs
@@ -278,17 +210,6 @@ def write_run(folder: Path, result: dict, title: str) -> None:
     plot_runs([folder], folder / "curve.png", title=title)
 
 
-@dataclass
-class Record:
-    """A second CSV that receives each finished run as a row of its own columns (the benchmark records):
-    ``row(run, result_row)`` makes the row; a run whose ``key`` columns are there counts as done."""
-
-    path: Path
-    fields: list
-    key: tuple
-    row: object
-
-
 def one_line(error: BaseException) -> str:
     cause = getattr(error, "cause", None)  # a RayTaskError carries the task's own exception
     error = cause if isinstance(cause, BaseException) else error
@@ -298,32 +219,16 @@ def one_line(error: BaseException) -> str:
 
 
 class Sweep:
-    """Runs ``runs`` on Ray and records them; ``run()`` returns the number of runs that failed.
+    """Runs ``runs`` on Ray and records them; ``run()`` returns the number of runs that failed. The commands in the
+    CSV name ``out`` as it is given (a relative folder stays relative)."""
 
-    ``record``: a Record that also receives each finished run; ``after_write(folder)``: called once a finished run's
-    folder is written (the benchmarks round their progress.csv there)."""
-
-    def __init__(
-        self,
-        runs,
-        out,
-        csv_path=None,
-        workers=None,
-        address=None,
-        retries=0,
-        quiet=False,
-        record=None,
-        after_write=None,
-        command_out=None,
-    ):
+    def __init__(self, runs, out, csv_path=None, workers=None, address=None, retries=0, quiet=False):
         self.runs, self.out = list(runs), Path(out)
-        self.command_out = command_out or self.out  # the folder as the commands in the CSV name it
         self.csv_path = Path(csv_path) if csv_path else self.out / "sweep.csv"
         self.label_fields = list(self.runs[0].labels) if self.runs else ["env", "seed"]
         self.fields = self.label_fields + RESULT_FIELDS
         self.workers, self.retries, self.quiet = workers, retries, quiet
         self.address = address or os.environ.get("RAY_ADDRESS") or None
-        self.record, self.after_write = record, after_write
         self.commit = commit_of_code()
         self.failed: list[str] = []
         self.recorded = 0
@@ -337,20 +242,17 @@ class Sweep:
                 done[tuple(row[k] for k in self.label_fields)] = row["command"]
         for run in self.runs:
             made_by = done.get(run.key())
-            if made_by is not None and made_by != run.command(self.command_out):
+            if made_by is not None and made_by != run.command(self.out):
                 raise MinippoError(
-                    f"{self.csv_path} holds {run.name} made by '{made_by}', not by '{run.command(self.command_out)}';"
+                    f"{self.csv_path} holds {run.name} made by '{made_by}', not by '{run.command(self.out)}';"
                     " give this sweep another --out or --csv"
                 )
-        done = set(done)
-        if self.record is not None:
-            done |= {tuple(row[k] for k in self.record.key) for row in read_rows(self.record.path)}
         return [run for run in self.runs if run.key() not in done]
 
     def finish(self, run: Run, result: dict | None, error: str, attempts: int) -> None:
         """Write a finished run's folder and its CSV row (rows of failures too)."""
         row = {**run.labels, "status": "failed", "error": error, "attempts": attempts, "commit": self.commit}
-        row["command"] = run.command(self.command_out)
+        row["command"] = run.command(self.out)
         if result is not None:
             folder = self.out / run.name
             write_run(folder, result, f"{run.config.env_id}, seed {run.config.seed}")
@@ -365,10 +267,6 @@ class Sweep:
                 node=result["node"],
                 host=result["host"],
             )
-            if self.after_write is not None:
-                self.after_write(folder)
-            if self.record is not None:
-                append_row(self.record.path, self.record.fields, self.record.row(run, row))
         else:
             self.failed.append(run.name)
         append_row(self.csv_path, self.fields, row)
@@ -376,8 +274,6 @@ class Sweep:
 
     def run(self) -> int:
         check_columns(self.csv_path, self.fields)
-        if self.record is not None:
-            check_columns(self.record.path, self.record.fields)
         todo = self.todo()
         skipped = len(self.runs) - len(todo)
         if not todo:
@@ -462,8 +358,8 @@ def interrupt_after():
             raise KeyboardInterrupt
 
 
-def execute(runs: list[Run], on_result, workers=None, address=None, retries=0, progress=None) -> None:
-    """Train ``runs`` as Ray tasks of one CPU each (``train_run``, or a run's own ``task``) and call
+def execute(runs: list[Run], on_result, workers=None, address=None, retries=0, progress=None, task=None) -> None:
+    """Train ``runs`` as Ray tasks of one CPU each (``task``, by default ``train_run``) and call
     ``on_result(run, result, error, attempts)`` as each one ends: the task's result and "" when it trained, None and
     a one-line reason when its last attempt failed.
 
@@ -472,7 +368,7 @@ def execute(runs: list[Run], on_result, workers=None, address=None, retries=0, p
     ray, started = start_ray(workers, address)
     pending: dict = {}  # ObjectRef -> (run, attempt)
     bar = progress(len(runs)) if progress else None
-    tasks: dict = {}  # the function a run trains with (train_run unless Run.task) -> its Ray task
+    remote = ray.remote(task or train_run).options(num_cpus=1, max_retries=0)
     try:
         board = ray.remote(num_cpus=0)(Board).remote()
         window = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
@@ -481,10 +377,7 @@ def execute(runs: list[Run], on_result, workers=None, address=None, retries=0, p
         while queue or pending:
             while queue and len(pending) < window:
                 run, attempt = queue.pop(0)
-                function = run.task or train_run
-                if function not in tasks:
-                    tasks[function] = ray.remote(function).options(num_cpus=1, max_retries=0)
-                pending[tasks[function].remote(run.config.to_dict(), run.name, board)] = (run, attempt)
+                pending[remote.remote(run.config.to_dict(), run.name, board)] = (run, attempt)
             ready, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)
             for ref in ready:
                 run, attempt = pending.pop(ref)
@@ -548,11 +441,3 @@ def status_line(ray, board, pending: dict, last: str) -> str:
             shown = "—" if value is None or math.isnan(value) else f"{value:.1f}"
             parts.append(f"{run.name} {100 * step // total}% {shown}")
     return "; ".join(([f"last {last}"] if last else []) + parts)[:400]
-
-
-def time_runs(runs: list[Run]) -> float:
-    """Train ``runs`` one after the other in this process (the baseline a sweep is compared with); wall seconds."""
-    started = time.perf_counter()
-    for run in runs:
-        train_run(run.config.to_dict(), run.name)
-    return time.perf_counter() - started
