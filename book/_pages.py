@@ -1,5 +1,6 @@
-"""What the book's pages share, so that each page can stay about PPO: the plot style, central finite differences,
-one batch collected from a fresh policy, and K epochs of minibatch Adam on that one batch.
+"""What the book's pages share, so that each page can stay about PPO: the plot style, central finite differences
+(minippo.gradcheck), the two CartPole settings (minippo.presets), one batch collected from a fresh policy, and K
+epochs of minibatch Adam on that one batch.
 
 Every page imports it first (its cells run with ``book/`` as the working directory).
 """
@@ -12,12 +13,15 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from threadpoolctl import threadpool_limits  # noqa: E402
 
 from minippo import corridor  # noqa: E402
+from minippo.gradcheck import central_differences  # noqa: E402
 from minippo.plotting import INK, ORANGE, SAGE  # noqa: E402
 from minippo.ppo import Trainer, compute_advantages, flatten, update_minibatch  # noqa: E402
+from minippo.presets import CARTPOLE_PPO, CARTPOLE_VANILLA  # noqa: E402
 
+threadpool_limits(1, user_api="blas")  # whether NumPy was loaded before this module or not
 SLATE = "#4f6d8f"
 plt.rcParams.update(
     {
@@ -44,53 +48,8 @@ __all__ = [
     "one_batch",
 ]
 
-# The book's two CartPole settings, each named here once. Both switch off what CartPole does not need and later
-# chapters teach: observation normalisation, reward scaling, value clipping.
-# The vanilla settings (chapters 3, 5, 6): discounted returns minus V for Â (no GAE), no entropy bonus, and a step
-# size large enough for forty steps on one batch to show what they do.
-VANILLA_CARTPOLE = dict(
-    env_id="CartPole-v1",
-    use_gae=False,
-    horizon=512,
-    lr=2.5e-3,
-    entropy_coef=0.0,
-    normalize_observations=False,
-    scale_rewards=False,
-    clip_value_loss=False,
-)
-# The PPO settings (chapters 8 to 10): GAE, K = 4 epochs of minibatches of 128, an entropy bonus c2 = 0.01, and
-# the gentler step size 2.5e-4.
-PPO_CARTPOLE = dict(
-    env_id="CartPole-v1",
-    horizon=512,
-    minibatch_size=128,
-    epochs=4,
-    entropy_coef=0.01,
-    normalize_observations=False,
-    scale_rewards=False,
-    clip_value_loss=False,
-    lr=2.5e-4,
-)
-
-
-def central_differences(f, array, step=1e-6, at=None):
-    """∂f/∂array by central differences, (f(θ + Δ e_i) − f(θ − Δ e_i)) / 2Δ, one entry at a time.
-
-    ``f`` takes no argument and reads ``array``, which is changed in place and restored entry by entry. ``at``
-    picks flat indices to differentiate along (all entries by default); the result then has one entry per index.
-    """
-    indices = range(array.size) if at is None else at
-    grad = np.zeros(array.shape if at is None else len(at), dtype=float)
-    flat_grad = grad.reshape(-1)
-    for j, i in enumerate(indices):
-        saved = array.flat[i]
-        array.flat[i] = saved + step
-        up = f()
-        array.flat[i] = saved - step
-        down = f()
-        array.flat[i] = saved
-        flat_grad[j] = (up - down) / (2 * step)
-    return grad
+# The book's two CartPole settings and its finite differences, from minippo (one copy each)
+VANILLA_CARTPOLE, PPO_CARTPOLE = CARTPOLE_VANILLA, CARTPOLE_PPO
 
 
 def one_batch(config):

@@ -47,7 +47,7 @@ def gae(rewards, values, next_values, terminated, truncated, gamma: float, lam: 
     carry = 1.0 - episode_ends.astype(np.float64)
     decay = gamma * lam
     # The recurrence runs backwards over t on plain Python floats, one environment (column) at a time: on one
-    # number per step, NumPy's per-call overhead would cost ten times the arithmetic.
+    # number per step, NumPy's per-call overhead would outweigh the arithmetic.
     T = len(deltas)
     advantages = np.empty((T, deltas.size // T))
     for i, (delta, keep) in enumerate(zip(deltas.reshape(T, -1).T.tolist(), carry.reshape(T, -1).T.tolist())):

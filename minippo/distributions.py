@@ -19,6 +19,15 @@ def _where_possible(probs: np.ndarray, terms) -> np.ndarray:
         return np.where(probs > 0.0, terms(probs), 0.0)
 
 
+def sample_categorical(logits: np.ndarray, uniforms: np.ndarray) -> np.ndarray:
+    """One action per row of ``logits`` (n, k) by the inverse CDF: the first a with u·Σ_j p_j < Σ_{j≤a} p_j, where
+    p = e^(z − max z) need not be normalised and u ~ U[0, 1) is one of ``uniforms`` (n,)."""
+    probs = np.exp(logits - logits.max(axis=-1, keepdims=True))
+    cumulative = np.cumsum(probs, axis=-1)
+    below = uniforms[:, None] * cumulative[:, -1:] > cumulative
+    return np.minimum(below.sum(axis=-1), logits.shape[-1] - 1)
+
+
 class Categorical:
     """π(a|s) = softmax(z)_a for a batch of logits z of shape (n, k), for discrete action spaces."""
 
@@ -29,9 +38,7 @@ class Categorical:
         self.probs = np.exp(self.log_probs)
 
     def sample(self, rng: np.random.Generator) -> np.ndarray:
-        u = rng.random((self.probs.shape[0], 1))
-        cumulative = np.cumsum(self.probs, axis=-1)
-        return np.minimum((u > cumulative).sum(axis=-1), self.probs.shape[-1] - 1)
+        return sample_categorical(self.logits, rng.random(self.logits.shape[0]))
 
     def mode(self) -> np.ndarray:
         return self.logits.argmax(axis=-1)

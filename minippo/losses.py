@@ -12,8 +12,8 @@ import numpy as np
 
 
 def mean(x) -> float:
-    """Ê[x], the average over the minibatch, as a Python float: Σ x / n. (np.mean computes the same, but its
-    Python-level bookkeeping costs four times the sum itself on a minibatch of 64, several times per minibatch.)"""
+    """Ê[x], the average over the minibatch, as a Python float: Σ x / n (np.mean's bookkeeping outweighs the sum on
+    a minibatch this small)."""
     return float(x.sum()) / x.size
 
 

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from minippo.distributions import sample_categorical
 from minippo.errors import NonFiniteError
 
 
@@ -71,12 +72,7 @@ class Rollout:
                 if self.clip_actions:  # np.clip, without its wrapper's overhead
                     env_actions = np.minimum(np.maximum(env_actions, self.low, out=clipped), self.high, out=clipped)
             else:
-                probs = np.exp(out - out.max(axis=1, keepdims=True))
-                cumulative = np.cumsum(probs, axis=1)
-                actions[t] = np.minimum(
-                    (uniforms[t][:, None] * cumulative[:, -1:] > cumulative).sum(axis=1), agent.act_dim - 1
-                )
-                env_actions = actions[t]
+                env_actions = actions[t] = sample_categorical(out, uniforms[t])
             for i, env in enumerate(self.envs):
                 next_obs, reward, term, trunc, _ = env.step(env_actions[i])
                 rewards[t, i] = reward

@@ -12,6 +12,7 @@ from minippo.errors import NonFiniteError
 from minippo.normalization import ObservationNormalizer, RewardScaler, RunningMeanStd
 from minippo.optimizer import Adam
 from minippo.ppo import PROGRESS_FIELDS, loss_and_grad, update_minibatch
+from minippo.presets import CARTPOLE_PPO, MUJOCO
 from minippo.rollout import Rollout
 
 TIMING = {"steps_per_s", "wall_s"}
@@ -146,17 +147,7 @@ def test_same_seed_same_progress_bitwise(tmp_path, env_id):
     assert list(a[0]) == [f for f in PROGRESS_FIELDS if f not in TIMING]
 
 
-CARTPOLE = dict(
-    env_id="CartPole-v1",
-    horizon=512,
-    minibatch_size=128,
-    epochs=4,
-    entropy_coef=0.01,
-    normalize_observations=False,
-    scale_rewards=False,
-    clip_value_loss=False,
-    lr=2.5e-4,
-)
+CARTPOLE = CARTPOLE_PPO
 
 
 @pytest.mark.timeout(240)
@@ -183,3 +174,9 @@ def test_interrupted_run_resumes_from_its_checkpoint(tmp_path):
     assert [int(r["update"]) for r in rows] == list(range(1, 9))
     assert rows[:4] == first
     assert int(rows[-1]["step"]) == 4096
+
+
+def test_the_paper_mujoco_preset_is_configs_defaults():
+    defaults = Config()
+    assert {key: getattr(defaults, key) for key in MUJOCO} == MUJOCO
+    assert (defaults.horizon, defaults.lr, defaults.epochs, defaults.minibatch_size) == (2048, 3e-4, 10, 64)

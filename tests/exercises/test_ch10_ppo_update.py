@@ -16,7 +16,8 @@ from _harness import call_checking_inputs, check_close, check_scalar, numerical_
 from minippo import losses
 from minippo.agent import ActorCritic
 from minippo.optimizer import linear_schedule
-from minippo.ppo import Config, Trainer, compute_advantages
+from minippo.ppo import Config, Trainer, compute_advantages, flatten
+from minippo.presets import CARTPOLE_PPO
 
 student = _harness.student  # the fixture: the implementation under test (see _harness.py)
 pytest_generate_tests = _harness.pytest_generate_tests  # one run per wrong variant under MINIPPO_IMPL=wrong
@@ -465,40 +466,13 @@ def test_ppo_update_on_one_full_batch_takes_one_gradient_step(student):
 # Algorithm 1 with your update: CartPole-v1 must learn.
 
 
-def as_samples(batch, advantages, returns, dtype) -> dict:
-    """The rollout's (T, N) arrays as T·N rows, floats in the networks' dtype."""
-    T, N = batch.values.shape
-    data = {
-        "obs": batch.obs.reshape(T * N, -1),
-        "actions": batch.actions.reshape(T * N, *batch.actions.shape[2:]),
-        "logp": batch.logp.reshape(-1),
-        "policy_out": batch.policy_out.reshape(T * N, -1),
-        "values": batch.values.reshape(-1),
-        "advantages": advantages.reshape(-1),
-        "returns": returns.reshape(-1),
-    }
-    return {key: v.astype(dtype) if v.dtype.kind == "f" else v for key, v in data.items()}
-
-
 LEARN_STEPS = 60_000
 LEARN_THRESHOLD = 150.0
 
 
 @pytest.mark.timeout(150)
 def test_ppo_update_learns_cartpole(student):
-    config = Config(
-        env_id="CartPole-v1",
-        total_steps=LEARN_STEPS,
-        seed=1,
-        horizon=512,
-        minibatch_size=128,
-        epochs=4,
-        entropy_coef=0.01,
-        normalize_observations=False,
-        scale_rewards=False,
-        clip_value_loss=False,
-        lr=2.5e-4,
-    )
+    config = Config(**CARTPOLE_PPO, total_steps=LEARN_STEPS, seed=1)
     trainer = Trainer(config)
     started, recent = time.perf_counter(), [0.0]
     try:
@@ -506,7 +480,7 @@ def test_ppo_update_learns_cartpole(student):
             trainer.optimizer.lr = linear_schedule(config.lr, update, config.num_updates)
             batch = trainer.rollout.collect()
             advantages, returns = compute_advantages(batch, config)
-            data = as_samples(batch, advantages, returns, trainer.agent.params.dtype)
+            data = flatten(batch, advantages, returns, trainer.agent.params.dtype)
             student.ppo_update(trainer.agent, trainer.optimizer, data, config, trainer.rng)
             assert np.all(np.isfinite(trainer.agent.params)), (
                 f"ppo_update: the parameters became NaN or infinite at update {update}"
