@@ -1,10 +1,10 @@
 """Learning quality side by side with Stable-Baselines3: minippo's PPO and SB3's PPO on the same tasks, with the same
 settings (the paper's MuJoCo settings), the same seeds, on the same machine, as a sweep on minippo sweep's engine.
 
-    python benchmarks/peers.py                       # 3 tasks × seeds 1–5 × 2 libraries × 1M steps: 30 runs
-    python benchmarks/peers.py --tasks Hopper-v5 --seeds 1 2 --libraries sb3
-    python benchmarks/peers.py --address HOST:PORT   # on a running Ray cluster
-    python benchmarks/peers.py --list                # what is recorded, what is left
+    python -m benchmarks.peers                       # 3 tasks × seeds 1–5 × 2 libraries × 1M steps: 30 runs
+    python -m benchmarks.peers --tasks Hopper-v5 --seeds 1 2 --libraries sb3
+    python -m benchmarks.peers --address HOST:PORT   # on a running Ray cluster
+    python -m benchmarks.peers --list                # what is recorded, what is left
 
 Every run is a Ray task of one CPU and one math thread (one BLAS thread for minippo, one torch thread for SB3). A
 minippo run is exactly ``minippo train TASK --steps N --seed S`` (the defaults are the paper's settings); an SB3 run
@@ -30,12 +30,10 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-import records  # noqa: E402
-
-from minippo.ppo import Config  # noqa: E402
-from minippo.sweep import Record, Run, Sweep  # noqa: E402
+from benchmarks import common
+from minippo.ppo import Config
+from minippo.records import append_row, read_rows
+from minippo.sweep import Run, Sweep
 
 TASKS = ["Hopper-v5", "HalfCheetah-v5", "Walker2d-v5"]
 SEEDS = [1, 2, 3, 4, 5]
@@ -45,8 +43,8 @@ NAMES = {"minippo": "minippo", "sb3": "Stable-Baselines3"}
 EVAL_EPISODES, EVAL_SEED = 10, 0  # minippo eval's defaults: episode k is reset with seed EVAL_SEED + k
 FIELDS = ["library", "version", "task", "seed", "steps", "return_mean", "eval_mean", "wall_s", "commit", "command"]
 KEY = ("library", "task", "seed")
-CSV_PATH = records.RESULTS / "peers.csv"
-RUN_ROOT = records.RUNS / "peers"
+CSV_PATH = common.RESULTS / "peers.csv"
+RUN_ROOT = common.RUNS / "peers"
 SB3_MISSING = (
     'Stable-Baselines3 is not installed: pip install torch==2.13.0 (the CPU wheel) and then pip install -e ".[peers]"'
 )
@@ -104,7 +102,7 @@ def sb3_settings(config: Config) -> dict:
     }
 
 
-# the two Ray tasks (called like minippo.sweep.train_run, returning the same kind of result plus "eval", "version")
+# the Ray task (called like minippo.sweep.train_run, returning the same kind of result plus "eval" and "version")
 
 
 def minippo_version() -> str:
@@ -253,7 +251,9 @@ def sb3_evaluate(model, venv, env_id: str, episodes: int, seed: int) -> list[flo
     return returns
 
 
-TASK_FUNCTIONS = {"minippo": minippo_run, "sb3": sb3_run}
+def peer_run(config_dict: dict, name: str = "", board=None) -> dict:
+    """The sweep engine's task for both libraries: the run's name says which (``sb3-…`` or ``minippo-…``)."""
+    return (sb3_run if name.startswith("sb3-") else minippo_run)(config_dict, name, board)
 
 
 # the sweep
@@ -265,11 +265,11 @@ class PeerRun(Run):
 
     def command(self, out_dir) -> str:
         labels, config = self.labels, self.config
-        argv = ["python", "benchmarks/peers.py", "--libraries", labels["library"], "--tasks", config.env_id]
+        argv = ["python", "-m", "benchmarks.peers", "--libraries", labels["library"], "--tasks", config.env_id]
         argv += ["--seeds", str(config.seed), "--steps", str(config.total_steps)]
-        if str(out_dir) != records.relative(RUN_ROOT):
+        if str(out_dir) != common.relative(RUN_ROOT):
             argv += ["--runs", str(out_dir)]
-        return records.shell_text(argv)
+        return common.shell_text(argv)
 
 
 def sweep_runs(tasks, seeds, steps, libraries=LIBRARIES) -> list[PeerRun]:
@@ -280,7 +280,7 @@ def sweep_runs(tasks, seeds, steps, libraries=LIBRARIES) -> list[PeerRun]:
             for library in libraries:
                 config = Config(env_id=env_id, total_steps=steps, seed=seed)
                 labels = {"library": library, "task": env_id, "seed": seed}
-                runs.append(PeerRun(f"{library}-{env_id}-seed{seed}", config, labels, task=TASK_FUNCTIONS[library]))
+                runs.append(PeerRun(f"{library}-{env_id}-seed{seed}", config, labels))
     return runs
 
 
@@ -290,30 +290,22 @@ def mean(values) -> float:
 
 
 class PeerSweep(Sweep):
-    """minippo sweep's engine with the peers record: the row needs the task's evaluation and library version, which
-    the engine's own sweep row does not carry, so ``finish`` keeps the result for ``record_row``."""
+    """minippo sweep's engine with ``peer_run`` as its task, and each finished run also recorded in peers.csv (the
+    row needs the task's evaluation and library version, which the engine's own sweep row does not carry)."""
+
+    task = staticmethod(peer_run)
 
     def __init__(self, runs, root, record_csv, args):
-        super().__init__(
-            runs,
-            root,
-            workers=args.workers,
-            address=args.address,
-            retries=args.retries,
-            quiet=args.quiet,
-            record=Record(Path(record_csv), FIELDS, KEY, self.record_row),
-            after_write=records.compact_progress,
-            command_out=records.relative(root),
-        )
+        super().__init__(runs, root, workers=args.workers, address=args.address, retries=args.retries, quiet=args.quiet)
+        self.record_csv = record_csv
         self.commit = code_commit()
-        self.result: dict | None = None
 
-    def finish(self, run, result, error, attempts) -> None:
-        self.result = result
-        super().finish(run, result, error, attempts)
-
-    def record_row(self, run, row: dict) -> dict:
-        return peer_row(run, row, self.result)
+    def finish(self, run, result, error, attempts) -> dict:
+        row = super().finish(run, result, error, attempts)
+        if result is not None:
+            common.compact_progress(self.out / run.name)
+            append_row(self.record_csv, FIELDS, peer_row(run, row, result))
+        return row
 
 
 def peer_row(run, row: dict, result: dict) -> dict:
@@ -334,15 +326,12 @@ def peer_row(run, row: dict, result: dict) -> dict:
 
 def code_commit() -> str:
     """The short commit, with "+dirty" when minippo/ or this file (which sets SB3 up) has uncommitted edits."""
-    return records.git_commit(("minippo", "benchmarks/peers.py"))
+    return common.git_commit(("minippo", "benchmarks/peers.py"))
 
 
 def ship_by_value() -> None:
-    """Ray sends the task functions to its workers pickled. Run as a script they are in __main__ and go by value; when
-    this file is imported as ``peers`` (the tests), its module must go by value too: the workers cannot import it
-    (benchmarks/ is not a package, and on a cluster the file is only on this machine)."""
-    if __name__ == "__main__":
-        return
+    """Ray sends the task to its workers pickled; on a cluster this package is only on this machine, so the module
+    goes by value."""
     try:
         from ray import cloudpickle
     except ImportError:  # the engine says that Ray is missing
@@ -355,12 +344,12 @@ def check_tasks(tasks) -> None:
 
     for env_id in tasks:
         if env_id not in gym.registry:
-            records.fail(f"unknown task '{env_id}'")
+            common.fail(f"unknown task '{env_id}'")
         env = gym.make(env_id, disable_env_checker=True)
         continuous = isinstance(env.action_space, gym.spaces.Box)
         env.close()
         if not continuous:
-            records.fail(f"{env_id} has discrete actions; this comparison is set up for continuous control")
+            common.fail(f"{env_id} has discrete actions; this comparison is set up for continuous control")
 
 
 def main(argv=None) -> int:
@@ -372,15 +361,15 @@ def main(argv=None) -> int:
     parser.add_argument("--csv", default=str(CSV_PATH), help="where to append the records")
     parser.add_argument("--runs", default=str(RUN_ROOT), help="the folder of run folders")
     parser.add_argument("--list", action="store_true", help="show what is recorded and what is left, then stop")
-    records.add_sweep_options(parser)
+    common.add_sweep_options(parser)
     args = parser.parse_args(argv)
     if args.steps < 2048:
-        records.fail(f"--steps must be at least one horizon (2048), not {args.steps}")
+        common.fail(f"--steps must be at least one horizon (2048), not {args.steps}")
     if len(set(args.seeds)) != len(args.seeds) or len(set(args.tasks)) != len(args.tasks):
-        records.fail("a task or a seed is named twice")
+        common.fail("a task or a seed is named twice")
     runs = sweep_runs(args.tasks, args.seeds, args.steps, [name for name in LIBRARIES if name in args.libraries])
     if args.list:
-        done = {tuple(row[k] for k in KEY): row for row in records.read_rows(args.csv)}
+        done = {tuple(row[k] for k in KEY): row for row in read_rows(args.csv)}
         for run in runs:
             row = done.get(run.key())
             label = f"{run.labels['library']:<8} {run.labels['task']:<16} seed {run.labels['seed']}"
@@ -391,17 +380,22 @@ def main(argv=None) -> int:
         return 0
     check_tasks(args.tasks)
     if "sb3" in args.libraries and importlib.util.find_spec("stable_baselines3") is None:
-        records.fail(SB3_MISSING)
+        common.fail(SB3_MISSING)
     if args.workers is not None and args.workers < 1:
-        records.fail(f"--workers must be at least 1, not {args.workers}")
+        common.fail(f"--workers must be at least 1, not {args.workers}")
     ship_by_value()
     from minippo.errors import MinippoError
 
-    job = PeerSweep(runs, args.runs, args.csv, args)
+    recorded = {tuple(row[k] for k in KEY) for row in read_rows(args.csv)}
+    todo = [run for run in runs if run.key() not in recorded]
+    if not todo:
+        print(f"all {len(runs)} runs are recorded in {common.relative(args.csv)}")
+        return 0
+    job = PeerSweep(todo, common.relative(args.runs), args.csv, args)
     try:
         return 1 if job.run() else 0
     except MinippoError as error:
-        records.fail(str(error))
+        common.fail(str(error))
     except KeyboardInterrupt:
         print(f"interrupted; {job.recorded} runs recorded; the same command continues", file=sys.stderr)
         return 130

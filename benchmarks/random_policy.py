@@ -1,6 +1,6 @@
 """The random policy's mean return, the zero of Table 1's normalised score.
 
-    python benchmarks/random_policy.py HalfCheetah-v5 Hopper-v5 --episodes 100 --seed 0
+    python -m benchmarks.random_policy HalfCheetah-v5 Hopper-v5 --episodes 100 --seed 0
 
 Uniform random actions from the action space (seeded), ``gym.make`` defaults, one row per task appended to
 benchmarks/results/random.csv; a task already recorded with the same episodes and seed is skipped.
@@ -10,15 +10,13 @@ from __future__ import annotations
 
 import argparse
 import shlex
-import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-import records  # noqa: E402
+from benchmarks import common
+from benchmarks.scoring import RANDOM_EPISODES, RANDOM_SEED
+from minippo.records import append_row, read_rows
 
 FIELDS = ["env", "episodes", "seed", "return_mean", "return_std", "length_mean", "commit", "command"]
-CSV_PATH = records.RESULTS / "random.csv"
+CSV_PATH = common.RESULTS / "random.csv"
 
 
 def random_returns(env_id: str, episodes: int, seed: int) -> tuple[list[float], list[int]]:
@@ -46,34 +44,44 @@ def main(argv=None) -> int:
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("envs", nargs="+", metavar="ENV")
-    parser.add_argument("--episodes", type=int, default=100)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--episodes", type=int, default=RANDOM_EPISODES)
+    parser.add_argument("--seed", type=int, default=RANDOM_SEED)
     parser.add_argument("--csv", default=str(CSV_PATH))
     args = parser.parse_args(argv)
     if args.episodes < 1:
-        records.fail(f"--episodes must be at least 1, not {args.episodes}")
+        common.fail(f"--episodes must be at least 1, not {args.episodes}")
     import gymnasium as gym
 
     for env_id in args.envs:
         if env_id not in gym.registry:
-            records.fail(f"unknown environment id '{env_id}'")
+            common.fail(f"unknown environment id '{env_id}'")
     for env_id in args.envs:
         key = {"env": env_id, "episodes": args.episodes, "seed": args.seed}
-        if records.is_recorded(args.csv, key):
+        if any(all(row[k] == str(v) for k, v in key.items()) for row in read_rows(args.csv)):
             print(f"{env_id}: already recorded")
             continue
         returns, lengths = random_returns(env_id, args.episodes, args.seed)
-        script = "benchmarks/random_policy.py"
-        command = shlex.join(["python", script, env_id, "--episodes", str(args.episodes), "--seed", str(args.seed)])
+        command = shlex.join(
+            [
+                "python",
+                "-m",
+                "benchmarks.random_policy",
+                env_id,
+                "--episodes",
+                str(args.episodes),
+                "--seed",
+                str(args.seed),
+            ]
+        )
         row = {
             **key,
             "return_mean": round(float(np.mean(returns)), 3),
             "return_std": round(float(np.std(returns)), 3),
             "length_mean": round(float(np.mean(lengths)), 1),
-            "commit": records.git_commit(),
+            "commit": common.git_commit(),
             "command": command,
         }
-        records.append_row(args.csv, FIELDS, row, unique=("env", "episodes", "seed"))
+        append_row(args.csv, FIELDS, row)
         print(f"{env_id}: random policy {row['return_mean']} ± {row['return_std']} over {args.episodes} episodes")
     return 0
 

@@ -11,7 +11,7 @@ grow, as they do in any training of a chaotic simulator, and after some updates 
 of the same algorithm; the CSV shows where that happens. A changed algorithm (another loss, another normalisation,
 another random draw) shows as a difference far above rounding at update 1.
 
-    python benchmarks/same_math.py 92bb26d --env InvertedDoublePendulum-v5 --seed 1 --updates 20
+    python -m benchmarks.same_math 92bb26d --env InvertedDoublePendulum-v5 --seed 1 --updates 20
 """
 
 from __future__ import annotations
@@ -24,42 +24,43 @@ import sys
 import tempfile
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import records  # noqa: E402
+from benchmarks import common
+from minippo.records import read_rows
 
-CSV_PATH = records.RESULTS / "same_math.csv"
+CSV_PATH = common.RESULTS / "same_math.csv"
 COLUMNS = ("return_mean", "approx_kl", "entropy", "value_loss", "explained_variance")
 FIELDS = ["env", "seed", "dtype", "update", "earlier_commit", "commit"]
 FIELDS += [f"{column}_{side}" for column in COLUMNS for side in ("earlier", "current")]
 FIELDS += ["max_relative_difference", "command"]
 
 
-def git(*args, cwd=records.ROOT) -> str:
+def git(*args, cwd=common.ROOT) -> str:
     result = subprocess.run(["git", *args], cwd=cwd, capture_output=True, text=True)
     if result.returncode != 0:
         message = (result.stderr.strip().splitlines() or [f"exit code {result.returncode}"])[-1]
-        raise records.BenchmarkError(f"git {' '.join(args)}: {message}")
+        raise common.BenchmarkError(f"git {' '.join(args)}: {message}")
     return result.stdout.strip()
 
 
 def train(code_dir: Path, env_id: str, seed: int, updates: int, dtype: str, out: Path) -> list[dict]:
     """``python -m minippo train`` run from ``code_dir``, so that the minippo imported is the one in that folder."""
-    env = {**os.environ, **records.THREAD_ENV}
+    env = {**os.environ, **common.THREAD_ENV}
     probe = "import minippo, minippo.ppo as p; print(minippo.__file__); print('dtype' in p.Config.__dataclass_fields__)"
     where, has_dtype = subprocess.run(
         [sys.executable, "-c", probe], cwd=code_dir, env=env, capture_output=True, text=True
     ).stdout.split()
     if not Path(where).resolve().is_relative_to(code_dir.resolve()):
-        raise records.BenchmarkError(f"running from {code_dir} imported minippo from {where}, not from that folder")
-    argv = [sys.executable, "-m", *records.train_command(env_id, updates * 2048, seed, out, ["--force"])]
+        raise common.BenchmarkError(f"running from {code_dir} imported minippo from {where}, not from that folder")
+    argv = [sys.executable, "-m", "minippo", "train", env_id, "--steps", str(updates * 2048), "--seed", str(seed)]
+    argv += ["--out", str(out), "--quiet", "--force"]
     if has_dtype == "True":
         argv += ["--config", f"dtype={dtype}"]
     elif dtype != "float64":  # before the dtype field, minippo computed in float64 only
-        raise records.BenchmarkError(f"the code at {code_dir} has no dtype setting: it computes in float64 only")
+        raise common.BenchmarkError(f"the code at {code_dir} has no dtype setting: it computes in float64 only")
     result = subprocess.run(argv, cwd=code_dir, env=env, capture_output=True, text=True)
     if result.returncode != 0:
-        raise records.BenchmarkError(f"training at {code_dir} failed: {result.stderr.strip()[-300:]}")
-    return records.read_rows(out / "progress.csv")
+        raise common.BenchmarkError(f"training at {code_dir} failed: {result.stderr.strip()[-300:]}")
+    return read_rows(out / "progress.csv")
 
 
 def relative_difference(a: float, b: float) -> float:
@@ -81,25 +82,25 @@ def main(argv=None) -> int:
     )
     args = parser.parse_args(argv)
     if not 1 <= args.updates <= 500:
-        records.fail(f"--updates must be between 1 and 500, not {args.updates}")
-    command = "python benchmarks/same_math.py " + records.shell_text(sys.argv[1:] if argv is None else argv)
+        common.fail(f"--updates must be between 1 and 500, not {args.updates}")
+    command = "python -m benchmarks.same_math " + common.shell_text(sys.argv[1:] if argv is None else argv)
     try:
         try:
             earlier = git("rev-parse", "--short", "--verify", "--quiet", f"{args.earlier}^{{commit}}")
-        except records.BenchmarkError:
-            raise records.BenchmarkError(f"no commit named {args.earlier!r} in this repository") from None
-        current = records.git_commit()
+        except common.BenchmarkError:
+            raise common.BenchmarkError(f"no commit named {args.earlier!r} in this repository") from None
+        current = common.git_commit()
         with tempfile.TemporaryDirectory(prefix="minippo-same-math-") as scratch:
             scratch = Path(scratch)
             worktree = scratch / "earlier"
             git("worktree", "add", "--detach", str(worktree), earlier)
             try:
                 earlier_rows = train(worktree, args.env, args.seed, args.updates, args.dtype, scratch / "earlier-run")
-                current_rows = train(records.ROOT, args.env, args.seed, args.updates, args.dtype, scratch / "run")
+                current_rows = train(common.ROOT, args.env, args.seed, args.updates, args.dtype, scratch / "run")
             finally:
                 git("worktree", "remove", "--force", str(worktree))
-    except records.BenchmarkError as error:
-        records.fail(str(error))
+    except common.BenchmarkError as error:
+        common.fail(str(error))
     table = []
     for before, now in zip(earlier_rows, current_rows):
         row = {
@@ -118,14 +119,14 @@ def main(argv=None) -> int:
         row["max_relative_difference"] = f"{max(differences):.3g}"
         table.append(row)
     same = ("env", "seed", "dtype", "earlier_commit")
-    kept = [old for old in records.read_rows(args.csv) if any(str(old[k]) != str(table[0][k]) for k in same)]
+    kept = [old for old in read_rows(args.csv) if any(str(old[k]) != str(table[0][k]) for k in same)]
     with open(args.csv, "w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=FIELDS)
         writer.writeheader()
         writer.writerows(kept + table)
     for row in table:
         print(f"update {row['update']:>3}: largest relative difference {row['max_relative_difference']}")
-    print(f"{args.env} seed {args.seed}, {args.dtype}: {earlier} against {current} -> {records.relative(args.csv)}")
+    print(f"{args.env} seed {args.seed}, {args.dtype}: {earlier} against {current} -> {common.relative(args.csv)}")
     return 0
 
 

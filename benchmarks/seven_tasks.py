@@ -1,10 +1,10 @@
 """The paper's seven MuJoCo tasks (Gymnasium v5), 1,000,000 steps, 3 seeds, paper defaults: a sweep on minippo
 sweep's engine.
 
-    python benchmarks/seven_tasks.py                       # every (task, seed) not yet recorded, Hopper first
-    python benchmarks/seven_tasks.py --envs Hopper-v5 --seeds 1 2 3
-    python benchmarks/seven_tasks.py --address HOST:PORT   # on a running Ray cluster
-    python benchmarks/seven_tasks.py --list                # what is recorded, what is left
+    python -m benchmarks.seven_tasks                       # every (task, seed) not yet recorded, Hopper first
+    python -m benchmarks.seven_tasks --envs Hopper-v5 --seeds 1 2 3
+    python -m benchmarks.seven_tasks --address HOST:PORT   # on a running Ray cluster
+    python -m benchmarks.seven_tasks --list                # what is recorded, what is left
 
 Each training is what ``minippo train ENV --steps 1000000 --seed S --out benchmarks/runs/mujoco/ENV-seedS --quiet``
 runs, as a Ray task of one CPU (on this machine, one per core, unless ``--workers`` or ``--address``). When it
@@ -15,27 +15,16 @@ with that command. Recorded (task, seed) pairs are skipped, so the same command 
 from __future__ import annotations
 
 import argparse
-import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+from benchmarks import common
+from benchmarks.scoring import SEVEN_TASKS as TASKS
+from minippo.records import read_rows
 
-import records  # noqa: E402
-
-TASKS = [  # Hopper first (the core issue's check), then the cheap tasks, then the two like Hopper
-    "Hopper-v5",
-    "InvertedPendulum-v5",
-    "InvertedDoublePendulum-v5",
-    "Reacher-v5",
-    "Swimmer-v5",
-    "HalfCheetah-v5",
-    "Walker2d-v5",
-]
 SEEDS = [1, 2, 3]
 STEPS = 1_000_000
 FIELDS = ["env", "seed", "steps", "return_mean", "wall_s", "steps_per_s", "commit", "command"]
-CSV_PATH = records.RESULTS / "mujoco.csv"
-RUN_ROOT = records.RUNS / "mujoco"
+CSV_PATH = common.RESULTS / "mujoco.csv"
+RUN_ROOT = common.RUNS / "mujoco"
 
 
 def sweep_runs(envs, seeds, steps) -> list:
@@ -58,23 +47,23 @@ def main(argv=None) -> int:
     parser.add_argument("--csv", default=str(CSV_PATH), help="where to append the records")
     parser.add_argument("--runs", default=str(RUN_ROOT), help="the folder of run folders")
     parser.add_argument("--list", action="store_true", help="show what is recorded and what is left, then stop")
-    records.add_sweep_options(parser)
+    common.add_sweep_options(parser)
     args = parser.parse_args(argv)
     unknown = [env_id for env_id in args.envs if env_id not in TASKS]
     if unknown:
-        records.fail(f"unknown task {', '.join(unknown)}; the seven are {', '.join(TASKS)}")
+        common.fail(f"unknown task {', '.join(unknown)}; the seven are {', '.join(TASKS)}")
     if args.steps < 2048:
-        records.fail(f"--steps must be at least one horizon (2048), not {args.steps}")
+        common.fail(f"--steps must be at least one horizon (2048), not {args.steps}")
     runs = sweep_runs(args.envs, args.seeds, args.steps)
     if args.list:
-        done = {(row["env"], row["seed"]) for row in records.read_rows(args.csv)}
-        for row in records.read_rows(args.csv):
+        done = {(row["env"], row["seed"]) for row in read_rows(args.csv)}
+        for row in read_rows(args.csv):
             print(f"recorded  {row['env']:<26} seed {row['seed']}  return {row['return_mean']:>9}")
         for run in runs:
             if run.key() not in done:
                 print(f"to do     {run.labels['env']:<26} seed {run.labels['seed']}")
         return 0
-    return records.run_sweep(runs, args.runs, args.csv, FIELDS, ("env", "seed"), records.record_row, args)
+    return common.run_sweep(runs, args.runs, args.csv, FIELDS, args)
 
 
 if __name__ == "__main__":

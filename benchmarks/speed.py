@@ -1,6 +1,6 @@
 """The speed race on one machine, in one process: raw environment stepping, minippo, and Stable-Baselines3 PPO.
 
-    python benchmarks/speed.py                    # Hopper-v5, 5 interleaved rounds -> benchmarks/results/speed.csv
+    python -m benchmarks.speed                    # Hopper-v5, 5 interleaved rounds -> benchmarks/results/speed.csv
 
 Each round measures, one after the other:
   raw        random actions in ``gym.make(ENV)`` (its defaults), resetting at episode ends: the ceiling, since any
@@ -32,9 +32,7 @@ import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-import records  # noqa: E402
+from benchmarks import common  # noqa: E402
 
 FIELDS = [
     "env",
@@ -52,7 +50,7 @@ FIELDS = [
     "commit",
     "command",
 ]
-CSV_PATH = records.RESULTS / "speed.csv"
+CSV_PATH = common.RESULTS / "speed.csv"
 
 
 def raw_stepping(env_id: str, steps: int, seed: int) -> float:
@@ -169,14 +167,14 @@ def main(argv=None) -> int:
     parser.add_argument("--csv", default=str(CSV_PATH))
     args = parser.parse_args(argv)
     if args.rounds < 1 or args.updates < 1 or args.raw_steps < 1:
-        records.fail("--rounds, --updates and --raw-steps must be positive")
+        common.fail("--rounds, --updates and --raw-steps must be positive")
     import gymnasium as gym
     import numpy as np
 
     import minippo
 
     if args.env not in gym.registry:
-        records.fail(f"unknown environment id '{args.env}'")
+        common.fail(f"unknown environment id '{args.env}'")
     load_before = os.getloadavg()[0]
     versions = {
         "raw": f"gymnasium {gym.__version__}",
@@ -202,13 +200,13 @@ def main(argv=None) -> int:
             flush=True,
         )
     rows = summarize(args.env, rounds, steps, versions)
-    command = "python benchmarks/speed.py " + shlex.join(argv if argv is not None else sys.argv[1:])
+    command = "python -m benchmarks.speed " + shlex.join(argv if argv is not None else sys.argv[1:])
     extra = {
         "load_before": round(load_before, 2),
         "load_after": round(os.getloadavg()[0], 2),
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d %H:%M"),
-        "commit": records.git_commit(),
+        "commit": common.git_commit(),
         "command": command.strip(),
     }
     path = Path(args.csv)

@@ -1,8 +1,8 @@
 """What ``minippo sweep`` saves: the same small grid trained one run after the other, then on the sweep engine with
 two workers, wall time side by side.
 
-    python benchmarks/sweep_speed.py                        # Hopper-v5, clip_epsilon 0.1 and 0.2, seeds 1-2
-    python benchmarks/sweep_speed.py --steps 204800 --workers 2
+    python -m benchmarks.sweep_speed                        # Hopper-v5, clip_epsilon 0.1 and 0.2, seeds 1-2
+    python -m benchmarks.sweep_speed --steps 204800 --workers 2
 
 One after the other is what a user without the engine would type: each run's ``minippo train`` command (run in this
 process, so no interpreter start-up is counted), every run with one math thread. The sweep is ``minippo sweep`` with
@@ -23,13 +23,11 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-import records  # noqa: E402
-
+from benchmarks import common
 from minippo.errors import MinippoError  # noqa: E402
+from minippo.records import append_row
 
-CSV_PATH = records.RESULTS / "sweep_speed.csv"
+CSV_PATH = common.RESULTS / "sweep_speed.csv"
 FIELDS = [
     "env",
     "grid",
@@ -76,23 +74,23 @@ def main(argv=None) -> int:
     try:
         runs = sweep.plan([args.env], sweep.parse_seeds(args.seeds), args.steps, sweep.parse_grid([args.grid]))
     except MinippoError as error:
-        records.fail(str(error))
+        common.fail(str(error))
     if args.workers < 1 or args.steps < 2048:
-        records.fail("--workers must be at least 1 and --steps at least one horizon (2048)")
-    load_before, commit = os.getloadavg()[0], records.git_commit()  # the code as it starts
+        common.fail("--workers must be at least 1 and --steps at least one horizon (2048)")
+    load_before, commit = os.getloadavg()[0], common.git_commit()  # the code as it starts
     with tempfile.TemporaryDirectory(prefix="sweep-speed-") as scratch:
         alone, swept = Path(scratch) / "alone", Path(scratch) / "swept"
         started = time.perf_counter()
         for run in runs:
             argv_run = shlex.split(run.command(alone))[1:]
             if minippo(argv_run) != 0:
-                records.fail(f"'{run.command(alone)}' failed")
+                common.fail(f"'{run.command(alone)}' failed")
         sequential = time.perf_counter() - started
         started = time.perf_counter()
         failed = sweep.Sweep(runs, swept, workers=args.workers, quiet=True).run()
         swept_s = time.perf_counter() - started
         if failed:
-            records.fail(f"{failed} runs of the sweep failed; see {swept / 'sweep.csv'}")
+            common.fail(f"{failed} runs of the sweep failed; see {swept / 'sweep.csv'}")
         same = all(progress(alone / run.name) == progress(swept / run.name) for run in runs)
         train_alone = sum(last_wall(alone / run.name) for run in runs)
         train_swept = sum(last_wall(swept / run.name) for run in runs)
@@ -112,9 +110,9 @@ def main(argv=None) -> int:
         "load_before": round(load_before, 2),
         "load_after": round(os.getloadavg()[0], 2),
         "commit": commit,
-        "command": "python benchmarks/sweep_speed.py " + records.shell_text(sys.argv[1:] if argv is None else argv),
+        "command": "python -m benchmarks.sweep_speed " + common.shell_text(sys.argv[1:] if argv is None else argv),
     }
-    records.append_row(args.csv, FIELDS, row)
+    append_row(args.csv, FIELDS, row)
     print(
         f"{len(runs)} runs of {args.env}: one after the other {row['sequential_s']} s, on the sweep engine with "
         f"{args.workers} workers {row['sweep_s']} s ({row['speedup']}x); the same progress: {row['same_progress']}"

@@ -318,7 +318,7 @@ def _check_pytest_timeout() -> bool:
     try:
         import pytest_timeout  # noqa: F401 - the per-test time limits need it
     except ImportError:
-        print("minippo: error: grading needs pytest and pytest-timeout: pip install -e '.[test]'", file=sys.stderr)
+        print("minippo: error: grading needs pytest and pytest-timeout: pip install -e '.[grade]'", file=sys.stderr)
         return False
     return True
 

@@ -220,7 +220,10 @@ def one_line(error: BaseException) -> str:
 
 class Sweep:
     """Runs ``runs`` on Ray and records them; ``run()`` returns the number of runs that failed. The commands in the
-    CSV name ``out`` as it is given (a relative folder stays relative)."""
+    CSV name ``out`` as it is given (a relative folder stays relative). ``task``: the function each run trains with,
+    called as ``train_run`` is and returning the same kind of result."""
+
+    task = staticmethod(train_run)
 
     def __init__(self, runs, out, csv_path=None, workers=None, address=None, retries=0, quiet=False):
         self.runs, self.out = list(runs), Path(out)
@@ -249,8 +252,8 @@ class Sweep:
                 )
         return [run for run in self.runs if run.key() not in done]
 
-    def finish(self, run: Run, result: dict | None, error: str, attempts: int) -> None:
-        """Write a finished run's folder and its CSV row (rows of failures too)."""
+    def finish(self, run: Run, result: dict | None, error: str, attempts: int) -> dict:
+        """Write a finished run's folder and its CSV row (rows of failures too); returns the row."""
         row = {**run.labels, "status": "failed", "error": error, "attempts": attempts, "commit": self.commit}
         row["command"] = run.command(self.out)
         if result is not None:
@@ -271,6 +274,7 @@ class Sweep:
             self.failed.append(run.name)
         append_row(self.csv_path, self.fields, row)
         self.recorded += 1
+        return row
 
     def run(self) -> int:
         check_columns(self.csv_path, self.fields)
@@ -279,7 +283,7 @@ class Sweep:
         if not todo:
             self.say(f"all {len(self.runs)} runs are recorded in {self.csv_path}")
             return 0
-        execute(todo, self.finish, self.workers, self.address, self.retries, self.progress)
+        execute(todo, self.finish, self.workers, self.address, self.retries, self.progress, self.task)
         self.say(
             f"{len(todo)} runs: {len(todo) - len(self.failed)} ok, {len(self.failed)} failed"
             + (f", {skipped} already recorded" if skipped else "")

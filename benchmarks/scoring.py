@@ -1,0 +1,370 @@
+"""Records in, tables out: every number that summary.md, the README and chapter 11 show is computed here from the
+CSV records in benchmarks/results/, and written as a CSV table under benchmarks/results/tables/ (and as Markdown).
+
+    python -m benchmarks.scoring          # rewrite every table from the records
+
+No sentences: the paragraphs around the tables are written once, by a person (benchmarks/report.py).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import statistics
+from collections import defaultdict
+from pathlib import Path
+
+from benchmarks.common import RESULTS, BenchmarkError, relative
+from minippo.records import read_rows
+
+TABLES = RESULTS / "tables"
+SEVEN_TASKS = [
+    "Hopper-v5",
+    "InvertedPendulum-v5",
+    "InvertedDoublePendulum-v5",
+    "Reacher-v5",
+    "Swimmer-v5",
+    "HalfCheetah-v5",
+    "Walker2d-v5",
+]
+# The paper's Table 1 scores (Schulman et al. 2017), in its row order; the settings' options are in table1.py.
+TABLE1_PAPER = {
+    "No clipping or penalty": -0.39,
+    "Clipping, ε = 0.1": 0.76,
+    "Clipping, ε = 0.2": 0.82,
+    "Clipping, ε = 0.3": 0.70,
+    "Adaptive KL, d_targ = 0.003": 0.68,
+    "Adaptive KL, d_targ = 0.01": 0.74,
+    "Adaptive KL, d_targ = 0.03": 0.71,
+    "Fixed KL, β = 0.3": 0.62,
+    "Fixed KL, β = 1": 0.71,
+    "Fixed KL, β = 3": 0.72,
+    "Fixed KL, β = 10": 0.69,
+}
+# Figure 3 of the paper, PPO (clip) at 1M steps, read off its plots (approximate): (low, high) of the readings.
+PAPER_FIGURE3 = {
+    "HalfCheetah-v5": (1800, 1800),
+    "Hopper-v5": (2200, 2300),
+    "InvertedDoublePendulum-v5": (8000, 8000),
+    "InvertedPendulum-v5": (1000, 1000),
+    "Reacher-v5": (-8, -5),
+    "Swimmer-v5": (110, 110),
+    "Walker2d-v5": (3000, 3400),
+}
+# CleanRL's ppo_continuous_action.py, MuJoCo v4, 1M steps, 3 seeds: (mean, std) from its published benchmark
+CLEANRL = {
+    "HalfCheetah-v5": (1442, 46),
+    "Hopper-v5": (2383, 272),
+    "Walker2d-v5": (2288, 572),
+    "InvertedPendulum-v5": (963, 22),
+}
+RANDOM_EPISODES, RANDOM_SEED = 100, 0
+STEPS_1M = 999_424  # 488 updates of 2048 steps
+
+
+# the statistics
+
+
+def mean_sd(values: list[float]) -> tuple[float, float]:
+    return statistics.fmean(values), statistics.stdev(values) if len(values) > 1 else 0.0
+
+
+def welch_interval(first: list[float], second: list[float], level: float = 0.95) -> dict:
+    """Welch's t interval for mean(first) − mean(second), variances not assumed equal, at the Welch–Satterthwaite
+    degrees of freedom; ``standing`` is ahead / behind when the interval excludes 0, else level."""
+    from scipy import stats
+
+    if len(first) < 2 or len(second) < 2:
+        raise ValueError("Welch's interval needs at least two values in each sample")
+    diff = statistics.fmean(first) - statistics.fmean(second)
+    part1, part2 = statistics.variance(first) / len(first), statistics.variance(second) / len(second)
+    se = math.sqrt(part1 + part2)
+    if se == 0.0:
+        low = high = diff
+    else:
+        df = (part1 + part2) ** 2 / (part1**2 / (len(first) - 1) + part2**2 / (len(second) - 1))
+        half = float(stats.t.ppf(0.5 + level / 2, df)) * se
+        low, high = diff - half, diff + half
+    standing = "ahead" if low > 0 else "behind" if high < 0 else "level"
+    return {"diff": diff, "se": se, "low": low, "high": high, "standing": standing}
+
+
+# Table 1's scoring
+
+
+def random_returns(rows: list[dict]) -> dict[str, float]:
+    """{task: the random policy's mean return} from random.csv: the 0 of Table 1's scale."""
+    chosen = [row for row in rows if row["episodes"] == str(RANDOM_EPISODES) and row["seed"] == str(RANDOM_SEED)]
+    return {row["env"]: float(row["return_mean"]) for row in chosen}
+
+
+def normalized_scores(runs: list[dict], random_return: dict[str, float]) -> dict[str, dict]:
+    """Table 1's scoring. Per task, the random policy's return is 0 and the best run of any setting on that task is
+    1; a setting's score is the mean of its runs' normalised returns. ``se``: the seeds' standard error, each task's
+    sample variance pooled as for a mean over K tasks, √(Σ_k s_k²/n_k) / K (None when a task has one seed).
+    Returns {setting: {"score", "se", "runs", "tasks", "per_task"}}."""
+    best: dict[str, float] = {}
+    for run in runs:
+        best[run["env"]] = max(best.get(run["env"], -math.inf), float(run["return_mean"]))
+    per_task = defaultdict(lambda: defaultdict(list))
+    for run in runs:
+        env_id = run["env"]
+        if env_id not in random_return:
+            raise BenchmarkError(f"no random-policy return recorded for {env_id}")
+        span = best[env_id] - random_return[env_id]
+        if span <= 0:
+            raise BenchmarkError(f"on {env_id} no run beats the random policy, so the score is undefined")
+        per_task[run["setting"]][env_id].append((float(run["return_mean"]) - random_return[env_id]) / span)
+    scores = {}
+    for setting, tasks in per_task.items():
+        values = [value for task in tasks.values() for value in task]
+        se = None
+        if all(len(task) > 1 for task in tasks.values()):
+            se = math.sqrt(sum(statistics.variance(task) / len(task) for task in tasks.values())) / len(tasks)
+        scores[setting] = {
+            "score": statistics.fmean(values),
+            "se": se,
+            "runs": len(values),
+            "tasks": len(tasks),
+            "per_task": {env_id: statistics.fmean(task) for env_id, task in tasks.items()},
+        }
+    return scores
+
+
+def complete(runs: list[dict], tasks, seeds, by: str) -> list[str]:
+    """The settings (``by="setting"``) that have a run for every task and seed, or the tasks (``by="env"``) on which
+    every recorded setting has one for every seed: what can be scored while a campaign is still running."""
+    done = {(run["setting"], run["env"], int(run["seed"])) for run in runs}
+    settings = list(dict.fromkeys(run["setting"] for run in runs))
+    if by == "setting":
+        return [s for s in settings if all((s, env_id, seed) in done for env_id in tasks for seed in seeds)]
+    return [env_id for env_id in tasks if all((s, env_id, seed) in done for s in settings for seed in seeds)]
+
+
+def table1(runs: list[dict], randoms: list[dict], tasks, seeds, steps: int) -> list[dict]:
+    """Table 1 from a runs record: the settings with every run of ``tasks`` × ``seeds`` at ``steps`` (or, while no
+    setting has them all, the complete tasks), scored, in the paper's row order."""
+    runs = [r for r in runs if r["env"] in tasks and int(r["seed"]) in seeds and int(r["steps"]) == steps]
+    settings = complete(runs, tasks, seeds, "setting")
+    if settings:
+        runs = [run for run in runs if run["setting"] in settings]
+    else:
+        tasks = complete(runs, tasks, seeds, "env")
+        runs = [run for run in runs if run["env"] in tasks]
+    if not runs:
+        raise BenchmarkError("no setting or task has all its runs recorded yet")
+    scores = normalized_scores(runs, random_returns(randoms))
+    return [
+        {
+            "setting": name,
+            "score": round(scores[name]["score"], 2),
+            "score_se": "" if scores[name]["se"] is None else round(scores[name]["se"], 2),
+            "paper_score": paper,
+            "runs": scores[name]["runs"],
+            "tasks": scores[name]["tasks"],
+            "task_ids": " ".join(env_id for env_id in tasks if env_id in scores[name]["per_task"]),
+            "seeds": len(seeds),
+            "steps": steps,
+        }
+        for name, paper in TABLE1_PAPER.items()
+        if name in scores
+    ]
+
+
+def on_one_scale(records: dict[str, list[dict]], randoms: list[dict]) -> list[dict]:
+    """Several runs records of Table 1's settings scored on one scale: per task the best run of any of them is 1,
+    over the tasks every record covers completely at its own seeds. One row per setting and record."""
+    tasks = set(SEVEN_TASKS)
+    for runs in records.values():
+        tasks &= set(complete(runs, SEVEN_TASKS, sorted({int(r["seed"]) for r in runs}), "env"))
+    pool = [{**r, "setting": (r["setting"], name)} for name, runs in records.items() for r in runs if r["env"] in tasks]
+    if not pool:
+        return []
+    scores = normalized_scores(pool, random_returns(randoms))
+    return [
+        {
+            "setting": setting,
+            "record": name,
+            "score": round(scores[(setting, name)]["score"], 3),
+            "score_se": round(scores[(setting, name)]["se"] or 0.0, 3),
+            "runs": scores[(setting, name)]["runs"],
+            "tasks": len(tasks),
+            "paper_score": paper,
+        }
+        for setting, paper in TABLE1_PAPER.items()
+        for name in records
+        if (setting, name) in scores
+    ]
+
+
+# the seven tasks, the side-by-side comparison, the rechecks
+
+
+def seven_tasks(runs: list[dict], record: str) -> list[dict]:
+    """Per task (the paper's seven, in order): the seeds' final returns, mean ± sample sd, the paper's Figure 3 range
+    and CleanRL's mean ± sd, and the mean minutes a run took. ``runs``: rows with env, seed, return_mean, wall_s."""
+    table = []
+    for env_id in SEVEN_TASKS:
+        rows = sorted((r for r in runs if r["env"] == env_id), key=lambda r: int(r["seed"]))
+        if not rows:
+            continue
+        returns = [float(r["return_mean"]) for r in rows]
+        mean, sd = mean_sd(returns)
+        low, high = PAPER_FIGURE3[env_id]
+        table.append(
+            {
+                "record": record,
+                "task": env_id,
+                "seeds": len(rows),
+                "returns": " ".join(f"{value:.1f}" for value in returns),
+                "mean": round(mean, 1),
+                "sd": round(sd, 1),
+                "paper_low": low,
+                "paper_high": high,
+                "paper": f"{low}" if low == high else f"{low} to {high}",
+                "at_or_above_paper": "yes" if mean >= low else "no",
+                "cleanrl": "{} ± {}".format(*CLEANRL[env_id]) if env_id in CLEANRL else "—",
+                "minutes": round(statistics.fmean(float(r["wall_s"]) for r in rows) / 60, 1),
+                "commits": " ".join(sorted({r["commit"] for r in rows})),
+            }
+        )
+    return table
+
+
+def peers(rows: list[dict]) -> list[dict]:
+    """minippo against Stable-Baselines3 per task and score (train: the last 100 training episodes; eval: 10
+    deterministic episodes): each library's mean ± standard error over seeds, and Welch's 95% interval of the
+    difference minippo − SB3 (the tasks where both libraries have two seeds at least)."""
+    table = []
+    for task in dict.fromkeys(row["task"] for row in rows):
+        mine = sorted((r for r in rows if r["task"] == task and r["library"] == "minippo"), key=lambda r: r["seed"])
+        theirs = sorted((r for r in rows if r["task"] == task and r["library"] == "sb3"), key=lambda r: r["seed"])
+        if len(mine) < 2 or len(theirs) < 2:
+            continue
+        for score, column in (("train", "return_mean"), ("eval", "eval_mean")):
+            a, b = [float(r[column]) for r in mine], [float(r[column]) for r in theirs]
+            interval = welch_interval(a, b)
+            table.append(
+                {
+                    "task": task,
+                    "score": score,
+                    "minippo_mean": round(statistics.fmean(a), 1),
+                    "minippo_se": round(statistics.stdev(a) / math.sqrt(len(a)), 1),
+                    "sb3_mean": round(statistics.fmean(b), 1),
+                    "sb3_se": round(statistics.stdev(b) / math.sqrt(len(b)), 1),
+                    "seeds": f"{len(a)}/{len(b)}",
+                    **{key: round(interval[key], 1) for key in ("diff", "low", "high")},
+                    "standing": interval["standing"],
+                    "minippo_minutes": round(statistics.fmean(float(r["wall_s"]) for r in mine) / 60, 1),
+                    "sb3_minutes": round(statistics.fmean(float(r["wall_s"]) for r in theirs) / 60, 1),
+                }
+            )
+    return table
+
+
+DETAILS = ["grad_norm_clipping", "clip_value_loss", "scale_rewards"]
+
+
+def one_detail(records: dict[str, list[dict]]) -> list[dict]:
+    """No clipping (L^CPI) with the three details all on, each one off alone, and all off: per task the mean final
+    return over seeds of each record (``records``: {column: runs}), on the tasks the one-off records ran."""
+    none = "No clipping or penalty"
+    tasks = [t for t in SEVEN_TASKS if any(r["env"] == t for d in DETAILS for r in records.get(f"{d} off", []))]
+    table = []
+    for task in tasks:
+        row = {"task": task}
+        for column, runs in records.items():
+            values = [float(r["return_mean"]) for r in runs if r["setting"] == none and r["env"] == task]
+            row[column] = round(statistics.fmean(values), 1) if values else ""
+            row[f"{column} seeds"] = len(values)
+        table.append(row)
+    return table
+
+
+def same_math(rows: list[dict]) -> list[dict]:
+    """Per comparison of two commits: the largest relative difference at update 1, and the first update where the
+    two runs part by more than 1% (empty when they never do)."""
+    groups = defaultdict(list)
+    for row in rows:
+        groups[(row["env"], row["seed"], row["dtype"], row["earlier_commit"], row["commit"])].append(row)
+    table = []
+    for (env_id, seed, dtype, earlier, commit), runs in groups.items():
+        runs.sort(key=lambda row: int(row["update"]))
+        parted = [int(r["update"]) for r in runs if float(r["max_relative_difference"]) > 0.01]
+        table.append(
+            {
+                "env": env_id,
+                "seed": seed,
+                "dtype": dtype,
+                "earlier_commit": earlier,
+                "commit": commit,
+                "updates": len(runs),
+                "difference_at_update_1": runs[0]["max_relative_difference"],
+                "parted_at_update": parted[0] if parted else "",
+                "command": runs[0]["command"],
+            }
+        )
+    return table
+
+
+# writing
+
+
+def write(name: str, rows: list[dict], folder=TABLES) -> Path:
+    """Write ``rows`` as ``folder/name.csv`` (whole, or not at all)."""
+    path = Path(folder) / f"{name}.csv"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    with open(tmp, "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]) if rows else ["empty"], lineterminator="\n")
+        writer.writeheader()
+        writer.writerows(rows)
+    tmp.replace(path)
+    return path
+
+
+def markdown(rows: list[dict], columns: dict[str, str]) -> str:
+    """A Markdown table of ``rows`` with ``columns`` {header: format string over a row's fields}."""
+    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    lines += ["| " + " | ".join(fmt.format(**row) for fmt in columns.values()) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def score_all(results=RESULTS, folder=TABLES) -> dict[str, list[dict]]:
+    """Every table, from the records in ``results``, written into ``folder``; returns them by name."""
+    results = Path(results)
+
+    def record(name):
+        return read_rows(results / name)
+
+    randoms = record("random.csv")
+    default_1m = record("table1_1m_runs.csv")
+    eps02 = [r for r in default_1m if r["setting"] == "Clipping, ε = 0.2"]
+    tables = {
+        "seven_tasks": seven_tasks(record("mujoco.csv"), "mujoco.csv") + seven_tasks(eps02, "table1_1m_runs.csv"),
+        "peers": peers(record("peers.csv")),
+        "table1_1m": table1(default_1m, randoms, SEVEN_TASKS, [1, 2, 3], STEPS_1M),
+        "table1_1m_two_implementations": on_one_scale(
+            {"defaults": default_1m, "as the paper describes it": record("table1_1m_paperimpl_runs.csv")}, randoms
+        ),
+        "table1_1m_more_seeds": on_one_scale(
+            {"seeds 1-3": default_1m, "seeds 4-6": record("table1_1m_more_seeds_runs.csv")}, randoms
+        ),
+        "cpi_one_detail": one_detail(
+            {
+                "all on": default_1m,
+                **{f"{d} off": record(f"cpi_without_{d}_runs.csv") for d in DETAILS},
+                "all off": record("table1_1m_paperimpl_runs.csv"),
+            }
+        ),
+        "same_math": same_math(record("same_math.csv")),
+    }
+    for name, rows in tables.items():
+        if rows:
+            write(name, rows, folder)
+    return tables
+
+
+if __name__ == "__main__":
+    for name, rows in score_all().items():
+        print(f"{relative(TABLES / (name + '.csv'))}: {len(rows)} rows")
