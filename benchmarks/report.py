@@ -107,12 +107,12 @@ SECTIONS = [
 ]
 
 
-def figure_seven_tasks(rows: list[dict], out: Path) -> None:
+def figure_seven_tasks(rows: list[dict], out: Path, runs_root=RUNS / "mujoco") -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(2, 4, figsize=(13, 5.6), dpi=100)
     for ax, task in zip(axes.flat, scoring.SEVEN_TASKS):
-        runs = [read_progress(RUNS / "mujoco" / f"{task}-seed{r['seed']}") for r in rows if r["env"] == task]
+        runs = [read_progress(Path(runs_root) / f"{task}-seed{r['seed']}") for r in rows if r["env"] == task]
         curves = seed_curves(runs)
         if curves is not None:
             draw_seed_band(ax, *curves, ORANGE, f"minippo, {len(runs)} seeds", alpha=0.25)
@@ -123,7 +123,7 @@ def figure_seven_tasks(rows: list[dict], out: Path) -> None:
     save(fig, out)
 
 
-def figure_peers(rows: list[dict], out: Path) -> None:
+def figure_peers(rows: list[dict], out: Path, runs_root=RUNS / "peers") -> None:
     import matplotlib.pyplot as plt
 
     tasks = list(dict.fromkeys(row["task"] for row in rows))
@@ -131,7 +131,7 @@ def figure_peers(rows: list[dict], out: Path) -> None:
     for ax, task in zip(axes[0], tasks):
         for library, colour in (("minippo", ORANGE), ("sb3", SAGE)):
             seeds = [r["seed"] for r in rows if r["task"] == task and r["library"] == library]
-            runs = [read_progress(RUNS / "peers" / f"{library}-{task}-seed{seed}") for seed in seeds]
+            runs = [read_progress(Path(runs_root) / f"{library}-{task}-seed{seed}") for seed in seeds]
             curves = seed_curves(runs)
             if curves is not None:
                 draw_seed_band(ax, *curves, colour, f"{library}, {len(runs)} seeds")

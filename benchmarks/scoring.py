@@ -173,7 +173,10 @@ def table1(runs: list[dict], randoms: list[dict], tasks, seeds, steps: int) -> l
 
 def on_one_scale(records: dict[str, list[dict]], randoms: list[dict]) -> list[dict]:
     """Several runs records of Table 1's settings scored on one scale: per task the best run of any of them is 1,
-    over the tasks every record covers completely at its own seeds. One row per setting and record."""
+    over the tasks every record covers completely at its own seeds. One row per setting and record ([] while a
+    record is empty)."""
+    if not all(records.values()):
+        return []
     tasks = set(SEVEN_TASKS)
     for runs in records.values():
         tasks &= set(complete(runs, SEVEN_TASKS, sorted({int(r["seed"]) for r in runs}), "env"))

@@ -1,21 +1,15 @@
-"""The benchmark scripts' logic on small made-up records: Table 1's scoring, CSV appends, the runners' sweeps and
-their resumes, the speed table's ratios, and the summary. No training runs here: the sweep engine's Ray tasks are
-replaced by a stub that returns what a finished training leaves behind."""
+"""The benchmarks package on small made-up records: Table 1's scoring and the other tables, the runners' sweeps and
+their resumes, the speed table's ratios, summary.md and the README's tables. No training runs here except the
+same-math script's two CartPole updates: the sweep engine's Ray tasks are replaced by a stub that returns what a
+finished training leaves behind."""
 
 import csv
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-
-import records  # noqa: E402
-import seven_tasks  # noqa: E402
-import speed  # noqa: E402
-import summary  # noqa: E402
-import table1  # noqa: E402
+from benchmarks import common, report, scoring, seven_tasks, speed, table1
+from minippo.records import read_rows
 
 
 def write_csv(path, rows):
@@ -67,7 +61,7 @@ def test_normalized_scores_match_hand_computation():
         {"setting": "kl", "env": "A", "return_mean": "100"},  # best on A
         {"setting": "kl", "env": "B", "return_mean": "50"},
     ]
-    scores = table1.normalized_scores(runs, randoms)
+    scores = scoring.normalized_scores(runs, randoms)
     # A: random 0, best 100; B: random -100, best 100 (span 200)
     assert scores["clip"]["score"] == pytest.approx((0.8 + 1.0) / 2)
     assert scores["cpi"]["score"] == pytest.approx((-0.4 + 0.5) / 2)
@@ -80,7 +74,7 @@ def test_score_standard_error_pools_the_seeds_within_each_task():
     randoms = {"A": 0.0, "B": 0.0}
     returns = {"A": [100.0, 60.0, 80.0], "B": [10.0, 30.0]}  # best: 100 on A, 30 on B
     runs = [{"setting": "s", "env": env, "return_mean": str(v)} for env, values in returns.items() for v in values]
-    score = table1.normalized_scores(runs, randoms)["s"]
+    score = scoring.normalized_scores(runs, randoms)["s"]
     # normalised: A 1.0, 0.6, 0.8 (variance 0.04 over 3 seeds); B 1/3, 1 (variance 2/9 over 2 seeds)
     assert score["score"] == pytest.approx((1.0 + 0.6 + 0.8 + 1 / 3 + 1.0) / 5)
     assert score["se"] == pytest.approx(((0.04 / 3 + (2 / 9) / 2) ** 0.5) / 2)
@@ -92,16 +86,16 @@ def test_normalized_scores_average_over_seeds():
         {"setting": "s", "env": "A", "return_mean": "30"},
         {"setting": "t", "env": "A", "return_mean": "50"},
     ]
-    scores = table1.normalized_scores(runs, {"A": 10.0})
+    scores = scoring.normalized_scores(runs, {"A": 10.0})
     assert scores["s"]["score"] == pytest.approx((0.0 + 0.5) / 2)
     assert scores["t"]["score"] == pytest.approx(1.0)
 
 
 def test_normalized_scores_refuse_missing_random_or_no_progress():
-    with pytest.raises(records.BenchmarkError, match="no random-policy return"):
-        table1.normalized_scores([{"setting": "s", "env": "A", "return_mean": "1"}], {})
-    with pytest.raises(records.BenchmarkError, match="beats the random policy"):
-        table1.normalized_scores([{"setting": "s", "env": "A", "return_mean": "1"}], {"A": 5.0})
+    with pytest.raises(common.BenchmarkError, match="no random-policy return"):
+        scoring.normalized_scores([{"setting": "s", "env": "A", "return_mean": "1"}], {})
+    with pytest.raises(common.BenchmarkError, match="beats the random policy"):
+        scoring.normalized_scores([{"setting": "s", "env": "A", "return_mean": "1"}], {"A": 5.0})
 
 
 def test_write_table_keeps_the_paper_column_and_order(tmp_path):
@@ -125,11 +119,10 @@ def test_write_table_keeps_the_paper_column_and_order(tmp_path):
     write_csv(tmp_path / "random.csv", [{"env": "A", "episodes": 100, "seed": 0, "return_mean": 0.0}])
     table = table1.write_table(tmp_path / "runs.csv", tmp_path / "random.csv", tmp_path / "t.csv", ["A"], [1], 5000)
     assert [row["setting"] for row in table] == [name for name, _, _ in table1.SETTINGS]
-    written = records.read_rows(tmp_path / "t.csv")
+    written = read_rows(tmp_path / "t.csv")
     assert written[0]["score"] == "0.0" and written[0]["paper_score"] == "-0.39"
     assert written[2]["score"] == "1.0" and written[2]["paper_score"] == "0.82"
     assert written[1]["score"] == "0.5"
-    assert "4,096 steps" in written[0]["scale"] and "paper: 7 tasks" in written[0]["scale"]
 
 
 def test_write_table_scores_only_the_tasks_whose_runs_are_all_recorded(tmp_path):
@@ -154,9 +147,9 @@ def test_write_table_scores_only_the_tasks_whose_runs_are_all_recorded(tmp_path)
     args = tmp_path / "runs.csv", tmp_path / "random.csv", tmp_path / "t.csv"
     table = table1.write_table(*args, ["A", "B"], [1, 2], 5000)
     assert {row["setting"]: row["score"] for row in table} == {cpi: round((0.5 + 0.4) / 2, 2), clip: 0.9}
-    assert all(row["tasks"] == 1 and row["scale"].startswith("tasks A;") for row in table)
+    assert all(row["tasks"] == 1 for row in table)
     assert all(row["task_ids"] == "A" for row in table)
-    with pytest.raises(records.BenchmarkError, match="no task has all its runs"):
+    with pytest.raises(common.BenchmarkError, match="no setting or task has all its runs"):
         table1.write_table(*args, ["B"], [1, 2], 5000)
 
 
@@ -170,22 +163,10 @@ def test_slug_makes_distinct_folder_names():
 # records and the runners' sweeps
 
 
-def test_append_row_writes_header_once_and_skips_duplicates(tmp_path):
-    path = tmp_path / "r.csv"
-    fields = ["env", "seed", "value"]
-    assert records.append_row(path, fields, {"env": "A", "seed": 1, "value": 1.5}, unique=("env", "seed"))
-    assert records.append_row(path, fields, {"env": "A", "seed": 2, "value": 2.5}, unique=("env", "seed"))
-    assert not records.append_row(path, fields, {"env": "A", "seed": 1, "value": 9.9}, unique=("env", "seed"))
-    lines = path.read_text().splitlines()
-    assert lines == ["env,seed,value", "A,1,1.5", "A,2,2.5"]
-    with pytest.raises(records.BenchmarkError, match="columns"):
-        records.append_row(path, ["env", "other"], {"env": "A", "other": 1})
-
-
 def test_compact_progress_rounds_floats_and_keeps_integers(tmp_path):
     fake_run(tmp_path / "run", 2, [1.23456789012, float("nan")])
-    records.compact_progress(tmp_path / "run")
-    rows = records.read_rows(tmp_path / "run" / "progress.csv")
+    common.compact_progress(tmp_path / "run")
+    rows = read_rows(tmp_path / "run" / "progress.csv")
     assert rows[0]["update"] == "1" and rows[1]["step"] == "4096"
     assert rows[0]["return_mean"] == "1.23457" and rows[1]["return_mean"] == "nan"
     assert rows[0]["steps_per_s"] == "3000.12"
@@ -201,7 +182,7 @@ def stub_engine(monkeypatch, tmp_path):
     files = {path.name: path.read_bytes() for path in (tmp_path / "made").iterdir()}
     last = {"step": 4096, "return_mean": 20.0, "wall_s": 2.04, "steps_per_s": 2000.04}
 
-    def execute(runs, on_result, workers=None, address=None, retries=0, progress=None):
+    def execute(runs, on_result, workers=None, address=None, retries=0, progress=None, task=None):
         for run in runs:
             done.append(run)
             on_result(run, {"files": files, "last": last, "node": "n1", "host": "h"}, "", 1)
@@ -215,7 +196,7 @@ def test_seven_tasks_records_runs_and_skips_recorded_ones(tmp_path, stub_engine)
     args = ["--envs", "Hopper-v5", "Swimmer-v5", "--seeds", "1", "2", "--steps", "4096"]
     args += ["--csv", str(csv_path), "--runs", str(runs), "--quiet"]
     assert seven_tasks.main(args) == 0
-    rows = records.read_rows(csv_path)
+    rows = read_rows(csv_path)
     assert list(rows[0]) == seven_tasks.FIELDS
     assert [(row["env"], row["seed"]) for row in rows] == [
         ("Hopper-v5", "1"),
@@ -225,13 +206,13 @@ def test_seven_tasks_records_runs_and_skips_recorded_ones(tmp_path, stub_engine)
     ]
     assert rows[0]["return_mean"] == "20.0" and rows[0]["steps"] == "4096" and rows[0]["wall_s"] == "2.0"
     assert rows[0]["command"] == f"minippo train Hopper-v5 --steps 4096 --seed 1 --out {runs}/Hopper-v5-seed1 --quiet"
-    assert rows[0]["commit"] == records.git_commit()
+    assert rows[0]["commit"] == common.git_commit()
     assert [run.config.seed for run in stub_engine] == [1, 2, 1, 2]
     assert (runs / "Hopper-v5-seed1" / "curve.png").exists()
-    sweep_rows = records.read_rows(runs / "sweep.csv")  # the engine's own log says where each run ran
+    sweep_rows = read_rows(runs / "sweep.csv")  # the engine's own log says where each run ran
     assert [(row["status"], row["node"]) for row in sweep_rows] == [("ok", "n1")] * 4
     assert seven_tasks.main(args) == 0  # everything recorded: nothing runs again
-    assert len(stub_engine) == 4 and len(records.read_rows(csv_path)) == 4
+    assert len(stub_engine) == 4 and len(read_rows(csv_path)) == 4
 
 
 def test_runners_skip_what_the_records_hold(tmp_path, stub_engine):
@@ -248,8 +229,8 @@ def test_table1_sweep_makes_the_commands_of_its_records():
     which minippo sets itself."""
     recorded = {
         (row["setting"], row["env"], row["seed"]): row["command"]
-        for path in (records.RESULTS / "table1_1m_runs.csv", records.RESULTS / "stale" / "table1_1m_runs.csv")
-        for row in records.read_rows(path)
+        for path in (common.RESULTS / "table1_1m_runs.csv", common.RESULTS / "stale" / "table1_1m_runs.csv")
+        for row in read_rows(path)
     }
     runs = table1.sweep_runs(table1.SETTINGS, ["HalfCheetah-v5", "Hopper-v5"], [1, 2], 1_000_000)
     assert len(runs) == 11 * 2 * 2 and runs[0].labels == {
@@ -262,7 +243,7 @@ def test_table1_sweep_makes_the_commands_of_its_records():
         assert command.split("minippo ", 1)[1] == run.command("benchmarks/runs/table1_1m").split("minippo ", 1)[1]
     fixed = next(run for run in runs if run.labels["setting"] == "Fixed KL, β = 3")
     assert (fixed.config.objective, fixed.config.adaptive_kl, fixed.config.kl_beta) == ("klpen", False, 3.0)
-    with pytest.raises(records.BenchmarkError, match="--objective and --config"):
+    with pytest.raises(common.BenchmarkError, match="--objective and --config"):
         table1.setting_config(["--steps", "5"])
 
 
@@ -295,175 +276,23 @@ def test_speed_ratios_use_medians():
     assert skipped["sb3"]["steps_per_s"] == "" and skipped["minippo"]["vs_sb3"] == ""
 
 
-def test_summary_from_a_tiny_fixture(tmp_path):
-    results, runs = tmp_path / "results", tmp_path / "runs"
-    mujoco = []
-    for seed, final in zip((1, 2, 3), (2100.0, 2400.0, 2700.0)):
-        fake_run(runs / f"Hopper-v5-seed{seed}", 3, [10.0, 1000.0, final])
-        mujoco.append(
-            {
-                "env": "Hopper-v5",
-                "seed": seed,
-                "steps": 6144,
-                "return_mean": final,
-                "wall_s": 60,
-                "steps_per_s": 3000,
-                "commit": "abc",
-                "command": "c",
-            }
-        )
-    fake_run(runs / "Swimmer-v5-seed1", 3, [1, 2, 50.0])
-    mujoco.append(
-        {
-            "env": "Swimmer-v5",
-            "seed": 1,
-            "steps": 6144,
-            "return_mean": 50.0,
-            "wall_s": 30,
-            "steps_per_s": 4000,
-            "commit": "abc",
-            "command": "c",
-        }
-    )
-    write_csv(results / "mujoco.csv", mujoco)
-    assert summary.main(["--results", str(results), "--runs", str(runs)]) == 0
-    text = (results / "summary.md").read_text()
-    hopper = next(line for line in text.splitlines() if line.startswith("| Hopper-v5"))
-    # mean 2400, sample std 300; the paper's low end 2200 is beaten
-    assert "2400.0 ± 300.0 (n = 3)" in hopper and "| yes |" in hopper and "2383 ± 272" in hopper
-    swimmer = next(line for line in text.splitlines() if line.startswith("| Swimmer-v5"))
-    assert "50.0 ± 0.0 (n = 1)" in swimmer and "| no |" in swimmer
-    assert "| Walker2d-v5 | not run yet" in text
-    assert "1 of 7 tasks have 3 seeds recorded" in text and "on 1 of them (Hopper-v5)" in text
-    assert "No Table 1 runs are recorded yet." in text and "has not been run yet" in text
-    assert (results / "mujoco_curves.png").stat().st_size > 0
-    assert not (results / "table1.png").exists()
-
-
-# the README's results come from the records
-
-
-def test_the_readme_shows_what_the_committed_records_say():
-    readme = records.ROOT / "README.md"
-    text = readme.read_text()
-    blocks = summary.readme_blocks(records.RESULTS)
-    assert set(blocks) == {"mujoco", "speed", "table1"}
-    assert summary.fill_readme(text, blocks) == text, "run `python benchmarks/summary.py --readme`"
-
-
-def test_readme_blocks_are_replaced_and_a_missing_block_is_named():
-    text = "intro\n<!-- summary:speed -->\nold\nlines\n<!-- /summary:speed -->\nrest\n"
-    expected = "intro\n<!-- summary:speed -->\nnew\n<!-- /summary:speed -->\nrest\n"
-    assert summary.fill_readme(text, {"speed": "new"}) == expected
-    with pytest.raises(records.BenchmarkError, match="table1"):
-        summary.fill_readme(text, {"table1": "x"})
-
-
-def test_table1_verdict_reads_the_ranks():
-    def table(scores):
-        return [{"setting": name, "score": score} for name, score in scores.items()]
-
-    names = [name for name, _, _ in table1.SETTINGS]
-    middle = {name: 0.5 for name in names[3:]}
-    paper_like = table({"Clipping, ε = 0.2": 0.8, "Clipping, ε = 0.1": 0.7, **middle, "No clipping or penalty": -0.4})
-    assert "ranks 1 of 11 and no clipping 11 of 11: the paper's ordering is reproduced." in summary.table1_verdict(
-        paper_like
-    )
-    half = table({"Clipping, ε = 0.2": 0.7, "Clipping, ε = 0.1": 0.8, **middle, "No clipping or penalty": -0.4})
-    half_reproduced = "half reproduced: no clipping is last, as in the paper, but ε = 0.2 is not first (0.70 against"
-    assert half_reproduced in summary.table1_verdict(half)
-    other = table({"Clipping, ε = 0.2": 0.7, "Clipping, ε = 0.1": 0.8, **middle, "No clipping or penalty": 0.6})
-    assert "the paper's ordering is not reproduced at this scale" in summary.table1_verdict(other)
-    with_errors = [dict(row, score_se="0.05") for row in half]
-    assert "(0.70 ± 0.05 against 0.80 ± 0.05), a gap of 0.10, within twice its standard error (0.07): level" in (
-        summary.table1_verdict(with_errors)
-    )
-    far = [dict(row, score_se="0.01") for row in half]
-    assert "(0.70 ± 0.01 against 0.80 ± 0.01), a gap of 0.10, more than twice its standard error (0.01)." in (
-        summary.table1_verdict(far)
-    )
-    partial = table({"Clipping, ε = 0.2": 0.8, "No clipping or penalty": -0.4})
-    assert "is not settled: only 2 of the 11 settings are recorded" in summary.table1_verdict(partial)
-
-
-def test_the_later_code_table_reads_only_the_default_objective_runs():
-    def run(setting, seed, value):
-        return {
-            "setting": setting,
-            "env": "Hopper-v5",
-            "seed": str(seed),
-            "steps": "999424",
-            "return_mean": str(value),
-            "wall_s": "60",
-            "steps_per_s": "100",
-            "commit": "abc1234",
-        }
-
-    rows = [run("Clipping, ε = 0.2", seed, value) for seed, value in ((1, 2100), (2, 2300), (3, 2500))]
-    rows.append(run("No clipping or penalty", 1, 5))
-    text = "\n".join(summary.current_code_lines(rows))
-    assert "| Hopper-v5 | 2300.0 ± 200.0 (n = 3) | 2100, 2300, 2500 |" in text
-    assert "commits abc1234" in text and "1 of 7 tasks have 3 seeds recorded" in text
-    assert "on 1 of them (Hopper-v5)." in text
-    assert summary.current_code_lines([run("No clipping or penalty", 1, 5)]) == []
-
-
-def test_the_recheck_sentence_gives_each_seed_and_the_commit():
-    rows = [
-        {
-            "env": "Hopper-v5",
-            "seed": str(seed),
-            "steps": "999424",
-            "return_mean": str(value),
-            "steps_per_s": "1",
-            "wall_s": "1",
-            "commit": "abc1234",
-            "command": "c",
-        }
-        for seed, value in ((2, 2100.0), (1, 2300.0))
-    ]
-    (line,) = summary.recheck_lines(rows)
-    assert "commit abc1234" in line and "seeds 1, 2): 2300, 2100, mean 2200.0 ± 141.4." in line
-
-
-def test_the_same_math_sentence_says_where_the_runs_part():
-    def row(env_id, update, difference):
-        return {
-            "env": env_id,
-            "seed": "1",
-            "dtype": "float64",
-            "update": str(update),
-            "earlier_commit": "abc1234",
-            "commit": "def5678",
-            "max_relative_difference": str(difference),
-            "command": "python same_math.py",
-        }
-
-    rows = [row("Hopper-v5", 1, 1e-15), row("Hopper-v5", 2, 3e-3), row("Hopper-v5", 3, 0.2), row("Hopper-v5", 4, 0.01)]
-    rows += [row("Swimmer-v5", 2, 2e-11), row("Swimmer-v5", 1, 4e-16)]
-    hopper, swimmer = summary.same_math_lines(rows)
-    assert "commit abc1234 against def5678" in hopper
-    assert "4e-16 at update 1" not in hopper and "1e-15 at update 1; the runs part (above 1%) at update 3." in hopper
-    assert swimmer.endswith("4e-16 at update 1; they stay within 2e-11 for all 2 updates.")
-
-
 def test_same_math_finds_no_difference_between_a_commit_and_itself(tmp_path):
     """The real script, end to end: HEAD in a worktree against the working tree, two CartPole updates. The same code
     on the same machine gives the same numbers, so every difference is exactly zero."""
-    import same_math
+    from benchmarks import same_math
 
-    if records.git_commit().endswith("+dirty"):
+    if common.git_commit().endswith("+dirty"):
         pytest.skip("minippo/ has uncommitted edits, so HEAD is not the code that runs")
     record = tmp_path / "same.csv"
     assert same_math.main(["HEAD", "--env", "CartPole-v1", "--updates", "2", "--csv", str(record)]) == 0
-    rows = records.read_rows(record)
+    rows = read_rows(record)
     assert [row["update"] for row in rows] == ["1", "2"]
     assert all(float(row["max_relative_difference"]) == 0.0 for row in rows)
     assert rows[0]["return_mean_earlier"] == rows[0]["return_mean_current"] != ""
 
 
 def test_same_math_refuses_an_unknown_commit_on_one_line(capsys, tmp_path):
-    import same_math
+    from benchmarks import same_math
 
     with pytest.raises(SystemExit) as stop:
         same_math.main(["no-such-commit", "--csv", str(tmp_path / "x.csv")])
@@ -473,180 +302,99 @@ def test_same_math_refuses_an_unknown_commit_on_one_line(capsys, tmp_path):
     assert not (tmp_path / "x.csv").exists()
 
 
-def test_table1_by_task_scores_each_task_as_the_table_does():
-    run = table1_run
-    runs = [
-        run("Clipping, ε = 0.2", "A", 1, 50),
-        run("Clipping, ε = 0.2", "A", 2, 30),
-        run("Fixed KL, β = 3", "A", 1, 110),
-        run("Fixed KL, β = 3", "A", 2, 90),
-        run("Clipping, ε = 0.2", "B", 1, 10),
-        run("Fixed KL, β = 3", "B", 1, 10),
-        run("Fixed KL, β = 3", "C", 1, 999),  # not among the table's tasks
-        run("Fixed KL, β = 3", "A", 3, 999, steps="2048"),  # another scale
-    ]
-    randoms = [
-        {"env": env_id, "return_mean": value, "episodes": "100", "seed": "0"}
-        for env_id, value in (("A", "10"), ("B", "0"), ("C", "10"))
-    ]
-    table = [
-        {"setting": "Clipping, ε = 0.2", "task_ids": "A B", "steps": "4096"},
-        {"setting": "Fixed KL, β = 3", "task_ids": "A B", "steps": "4096"},
-    ]
-    by_task = summary.table1_by_task(table, runs, randoms)
-    # task A: random 10, best 110, so (50-10)/100 and (30-10)/100 average 0.3; task B: random 0, best 10
-    assert by_task["Clipping, ε = 0.2"] == pytest.approx({"A": 0.3, "B": 1.0})
-    assert by_task["Fixed KL, β = 3"] == pytest.approx({"A": 0.9, "B": 1.0})
-    lines = summary.table1_task_lines(by_task)
-    assert lines[0] == "| Setting | A | B |" and lines[2] == "| Clipping, ε = 0.2 | 0.30 | 1.00 |"
-    assert lines[-1] == (
-        "Task by task, against Clipping, ε = 0.2, Fixed KL, β = 3 scores higher on 1 (A), "
-        "the same to two decimals on 1 (B) and lower on 0."
-    )
+# the other tables and the report
 
 
-def test_no_task_by_task_sentence_when_the_paper_setting_leads():
-    by_task = {"Clipping, ε = 0.2": {"A": 0.9}, "Fixed KL, β = 3": {"A": 0.5}}
-    assert summary.leader_sentence(by_task) is None
-    assert summary.table1_task_lines(by_task)[-1] == "| Fixed KL, β = 3 | 0.50 |"
-
-
-def test_two_implementations_are_scored_on_one_scale_over_complete_tasks():
+def test_records_on_one_scale_share_the_best_run_over_tasks_complete_in_each():
     run = table1_run
     clip, beta, cpi = "Clipping, ε = 0.2", "Fixed KL, β = 3", "No clipping or penalty"
-    default = [
-        run(clip, "Hopper-v5", 1, 60),
-        run(clip, "Hopper-v5", 2, 40),
-        run(beta, "Hopper-v5", 1, 90),
-        run(beta, "Hopper-v5", 2, 70),
-        run(cpi, "Hopper-v5", 1, 110),
-        run(cpi, "Hopper-v5", 2, 10),  # not run the other way, but sets the best
-        run(clip, "Swimmer-v5", 1, 50),
-        run(beta, "Swimmer-v5", 1, 50),
-    ]
-    other = [
-        run(clip, "Hopper-v5", 1, 80),
-        run(clip, "Hopper-v5", 2, 60),
-        run(beta, "Hopper-v5", 1, 30),
-        run(beta, "Hopper-v5", 2, 10),
-        run(clip, "Swimmer-v5", 1, 99),  # Swimmer lacks β = 3 here: not scored, not even in the best
-    ]
-    randoms = random_rows(["Hopper-v5", "Swimmer-v5"])
-    compared = summary.implementation_scores(default, other, randoms)
-    assert list(compared) == [clip, beta]  # Table 1's order, only the settings run both ways
-    # Hopper: random 10, best 110 (the defaults' unclipped seed 1), so a return r scores (r - 10) / 100
-    assert compared[clip][0]["score"] == pytest.approx(0.4) and compared[clip][1]["score"] == pytest.approx(0.6)
-    assert compared[beta][0]["score"] == pytest.approx(0.7) and compared[beta][1]["score"] == pytest.approx(0.1)
-    assert compared[clip][1]["tasks"] == 1 and compared[clip][1]["runs"] == 2
-    lines = summary.implementation_lines(compared)
-    assert lines[0].startswith("2 of Table 1's 11 settings, 1 tasks, 2 runs each way.")
-    whole = {setting: compared[clip] for setting in summary.TABLE1_PAPER}  # every row rerun: the text says so
-    assert summary.implementation_lines(whole)[0].startswith("All of Table 1's 11 settings,")
-    assert lines[4] == "| Clipping, ε = 0.2 | 0.40 ± 0.10 | 0.60 ± 0.10 | 0.82 |"
-    assert lines[-1] == (
-        "Among these settings Clipping, ε = 0.2 ranks 2 of 2 with minippo's defaults, behind Fixed KL, β = 3 (0.70); "
-        "1 of 2 as the paper describes it."
-    )  # ε = 0.2 leads as the paper describes it, so no task-by-task sentence follows
-    third = {**compared, **{name: compared[beta] for name in ("Clipping, ε = 0.3", "Fixed KL, β = 1")}}
-    assert summary.implementation_lines(third)[-1] == (  # every setting ahead of ε = 0.2 is named, with its score
-        "Among these settings Clipping, ε = 0.2 ranks 4 of 4 with minippo's defaults, behind Fixed KL, β = 3 (0.70), "
-        "Clipping, ε = 0.3 (0.70) and Fixed KL, β = 1 (0.70); 1 of 4 as the paper describes it."
-    )
-    behind = {**compared, beta: (compared[beta][0], {**compared[beta][1], "per_task": {"Hopper-v5": 0.9}})}
-    assert summary.implementation_lines(behind)[-1] == (
-        "As the paper describes it: task by task, against Clipping, ε = 0.2, Fixed KL, β = 3 scores higher on 1 "
-        "(Hopper-v5), the same to two decimals on 0 and lower on 0."
-    )
-    assert summary.implementation_scores(default, [], randoms) == {}
-    assert summary.implementation_scores(default, other[:1], randoms) == {}  # Hopper lacks the defaults' seed 2
-    assert list(summary.implementation_scores(default, other[:2], randoms)) == [clip]  # one setting, all seeds
+    default = [run(clip, "Hopper-v5", 1, 60), run(clip, "Hopper-v5", 2, 40), run(beta, "Hopper-v5", 1, 90)]
+    default += [run(beta, "Hopper-v5", 2, 70), run(cpi, "Hopper-v5", 1, 110), run(cpi, "Hopper-v5", 2, 10)]
+    default += [run(clip, "Swimmer-v5", 1, 50), run(beta, "Swimmer-v5", 1, 50)]  # Swimmer lacks seed 2 and cpi
+    other = [run(clip, "Hopper-v5", 1, 80), run(clip, "Hopper-v5", 2, 60), run(beta, "Hopper-v5", 1, 30)]
+    other += [run(beta, "Hopper-v5", 2, 10), run(clip, "Swimmer-v5", 1, 999)]  # Swimmer incomplete: not in the best
+    rows = scoring.on_one_scale({"defaults": default, "other": other}, random_rows(["Hopper-v5", "Swimmer-v5"]))
+    got = {(row["setting"], row["record"]): row["score"] for row in rows}
+    # Hopper only: random 10, best 110 (the defaults' unclipped seed 1), so a return r scores (r − 10) / 100
+    assert got == {(cpi, "defaults"): 0.5, (clip, "defaults"): 0.4, (clip, "other"): 0.6,
+                   (beta, "defaults"): 0.7, (beta, "other"): 0.1}  # fmt: skip
+    assert [row["setting"] for row in rows] == [cpi, clip, clip, beta, beta]  # Table 1's order
+    assert all(row["tasks"] == 1 for row in rows)
+    assert scoring.on_one_scale({"defaults": default, "other": []}, random_rows(["Hopper-v5"])) == []
 
 
-def test_more_seeds_are_scored_with_the_table_on_one_scale(tmp_path):
-    run = table1_run
-    clip, beta, cpi = "Clipping, ε = 0.2", "Fixed KL, β = 3", "No clipping or penalty"
-    table = [
-        run(clip, "Hopper-v5", 1, 60),
-        run(clip, "Hopper-v5", 2, 40),
-        run(beta, "Hopper-v5", 1, 90),
-        run(beta, "Hopper-v5", 2, 70),
-        run(cpi, "Hopper-v5", 1, 110),  # not rerun, but sets the best
-        run(clip, "Swimmer-v5", 1, 50),
-        run(beta, "Swimmer-v5", 1, 50),
-    ]
-    more = [
-        run(clip, "Hopper-v5", 3, 80),
-        run(clip, "Hopper-v5", 4, 60),
-        run(beta, "Hopper-v5", 3, 50),
-        run(beta, "Hopper-v5", 4, 10),
-        run(clip, "Swimmer-v5", 3, 999),  # Swimmer lacks β = 3 and seed 4: not scored, not even in the best
-    ]
-    randoms = random_rows(["Hopper-v5", "Swimmer-v5"])
-    scores = summary.more_seeds_scores(table, more, randoms)
-    assert list(scores) == [clip, beta]  # Table 1's order, only the settings run again
-    # Hopper: random 10, best 110, so a return r scores (r - 10) / 100
-    assert [scores[clip][part]["score"] for part in ("table", "new", "all")] == pytest.approx([0.4, 0.6, 0.5])
-    assert [scores[beta][part]["score"] for part in ("table", "new", "all")] == pytest.approx([0.7, 0.2, 0.45])
-    assert scores[clip]["all"]["runs"] == 4 and scores[clip]["all"]["tasks"] == 1
-    assert summary.more_seeds_scores(table, [], randoms) == {}
-    assert summary.more_seeds_scores(table, more[:3], randoms) == {}  # Hopper lacks β = 3 at seed 4
-
-    write_csv(tmp_path / summary.MORE_SEEDS_CSV, more)
-    lines = summary.more_seeds_block(tmp_path, table, randoms)
-    assert lines[2] == "| Setting | seeds 1, 2 | seeds 3, 4 | all seeds | paper (Table 1) |"
-    assert lines[4] == "| Clipping, ε = 0.2 | 0.40 ± 0.10 | 0.60 ± 0.10 | 0.50 ± 0.08 | 0.82 |"
-    # all seeds: ε = 0.2's variance over [0.5, 0.3, 0.7, 0.5] is 0.08/3, β = 3's over [0.8, 0.6, 0.4, 0.0] is 0.35/3,
-    # so the difference 0.05 has standard error sqrt((0.08 + 0.35) / 12) = 0.189
-    assert lines[-1] == (
-        "Over all seeds Clipping, ε = 0.2 scores 0.05 above Fixed KL, β = 3 (4 runs each, 0.3 standard errors of the "
-        "difference)."
-    )
-    assert summary.more_seeds_block(tmp_path / "nothing", table, randoms) == []
-    assert summary.seed_range([{"seed": "4"}, {"seed": "6"}, {"seed": "5"}]) == "4–6"
-
-
-def test_one_detail_table_puts_each_detail_between_all_on_and_all_off(tmp_path):
+def test_the_one_detail_table_reads_each_record_on_the_tasks_run_one_detail_at_a_time():
     def run(env_id, seed, value):
         return table1_run("No clipping or penalty", env_id, seed, value)
 
-    assert summary.one_detail_lines(tmp_path) == []  # nothing recorded yet
-    write_csv(tmp_path / "table1_1m_runs.csv", [run("IP", 1, 100), run("IP", 2, 200), run("Other", 1, 5)])
-    write_csv(tmp_path / "cpi_without_clip_value_loss_runs.csv", [run("IP", 1, 1000), run("IP", 2, 900)])
-    write_csv(tmp_path / "table1_1m_paperimpl_runs.csv", [run("IP", 1, 1000)])
-    lines = summary.one_detail_lines(tmp_path)
-    assert lines[0] == (
-        "| Task | all on | grad_norm_clipping off | clip_value_loss off | scale_rewards off | all off |"
-    )
-    assert lines[2:] == ["| IP | 150 (2) | — | 950 (2) | — | 1000 (1) |"]  # only the tasks run one detail at a time
+    records = {"all on": [run("Hopper-v5", 1, 100), run("Hopper-v5", 2, 200), run("Swimmer-v5", 1, 5)]}
+    records["clip_value_loss off"] = [run("Hopper-v5", 1, 1000), run("Hopper-v5", 2, 900)]
+    records["all off"] = [run("Hopper-v5", 1, 1000)]
+    (row,) = scoring.one_detail(records)
+    assert row["task"] == "Hopper-v5" and row["all on"] == 150.0 and row["all on seeds"] == 2
+    assert row["clip_value_loss off"] == 950.0 and row["all off"] == 1000.0 and row["all off seeds"] == 1
 
 
-def test_three_details_block_names_its_settings_being_rerun(tmp_path):
-    clip, beta, adaptive = "Clipping, ε = 0.2", "Fixed KL, β = 3", "Adaptive KL, d_targ = 0.01"
-
-    def other(name, seed, value):  # a run of the three-details record, with its command's overrides
-        return {**table1_run(name, "Hopper-v5", seed, value), "command": "minippo train --config scale_rewards=false"}
-
-    default = [table1_run(name, "Hopper-v5", seed, 50 + seed) for name in (clip, beta, adaptive) for seed in (1, 2)]
-    randoms = random_rows(["Hopper-v5"])
-    write_csv(tmp_path / "table1_1m_paperimpl_runs.csv", [other(clip, s, 40) for s in (1, 2)])
-    (tmp_path / "stale").mkdir()
-    write_csv(
-        tmp_path / "stale" / "table1_1m_paperimpl_runs.csv", [other(n, s, 70) for n in (beta, adaptive) for s in (1, 2)]
-    )
-    block = summary.implementation_block(tmp_path, default, randoms)
-    assert block[-1].startswith(f"Not shown: 2 KL-penalty settings ({adaptive}, {beta}), being rerun")
-    rerun = [other(beta, s, 60) for s in (1, 2)]  # β = 3 rerun: scored, and no longer named
-    write_csv(tmp_path / "table1_1m_paperimpl_runs.csv", [other(clip, s, 40) for s in (1, 2)] + rerun)
-    block = summary.implementation_block(tmp_path, default, randoms)
-    assert any(line.startswith(f"| {beta} |") for line in block)
-    assert block[-1].startswith(f"Not shown: 1 KL-penalty setting ({adaptive}), being rerun")
+def test_the_seven_task_table_compares_with_the_paper_and_cleanrl():
+    rows = [{"env": "Hopper-v5", "seed": str(s), "return_mean": str(v), "wall_s": "60", "commit": "abc"}
+            for s, v in ((2, 2400.0), (1, 2100.0), (3, 2700.0))]  # fmt: skip
+    rows.append({"env": "Swimmer-v5", "seed": "1", "return_mean": "50", "wall_s": "30", "commit": "def"})
+    hopper, swimmer = scoring.seven_tasks(rows, "r.csv")
+    assert (hopper["mean"], hopper["sd"], hopper["returns"]) == (2400.0, 300.0, "2100.0 2400.0 2700.0")
+    assert hopper["at_or_above_paper"] == "yes" and hopper["cleanrl"] == "2383 ± 272" and hopper["minutes"] == 1.0
+    assert swimmer["at_or_above_paper"] == "no" and swimmer["cleanrl"] == "—" and swimmer["sd"] == 0.0
 
 
-def test_table1_names_the_settings_being_rerun():
-    table = [{"setting": "Clipping, ε = 0.2", "score": 0.8}, {"setting": "No clipping or penalty", "score": -0.4}]
-    pending = ["Fixed KL, β = 3", "Adaptive KL, d_targ = 0.01"]
-    text = summary.table1_verdict(table, pending)
-    assert "Not shown: 2 KL-penalty settings (Fixed KL, β = 3, Adaptive KL, d_targ = 0.01), being rerun" in text
-    assert "Not shown" not in summary.table1_verdict(table)
-    stale = summary.stale_settings("table1_1m_runs.csv", table)  # the committed stale record names all seven
-    assert stale == [name for name, _, _ in table1.SETTINGS if "KL" in name]
+def test_welch_interval_against_scipys_welch_test():
+    from scipy import stats
+
+    first, second = [10.0, 12.0, 15.0, 11.0], [4.0, 9.0, 5.0]
+    interval = scoring.welch_interval(first, second)
+    # the interval's edges are where Welch's two-sided test of the shifted difference has p = 0.05
+    for edge in (interval["low"], interval["high"]):
+        shifted = [value - edge for value in first]
+        assert stats.ttest_ind(shifted, second, equal_var=False).pvalue == pytest.approx(0.05, rel=1e-6)
+    assert interval["diff"] == pytest.approx(12.0 - 6.0) and interval["standing"] == "ahead"
+    assert scoring.welch_interval(second, first)["standing"] == "behind"
+    assert scoring.welch_interval([1.0, 2.0], [1.5, 1.6])["standing"] == "level"
+    with pytest.raises(ValueError):
+        scoring.welch_interval([1.0], [2.0, 3.0])
+
+
+def test_same_math_table_says_where_the_runs_part():
+    def row(update, difference):
+        return {"env": "Hopper-v5", "seed": "1", "dtype": "float64", "update": str(update), "earlier_commit": "a",
+                "commit": "b", "max_relative_difference": str(difference), "command": "c"}  # fmt: skip
+
+    (parted,) = scoring.same_math([row(2, 3e-3), row(1, 1e-15), row(3, 0.2), row(4, 0.01)])
+    assert parted["difference_at_update_1"] == "1e-15" and parted["parted_at_update"] == 3 and parted["updates"] == 4
+    (together,) = scoring.same_math([row(1, 4e-16), row(2, 2e-11)])
+    assert together["parted_at_update"] == ""
+
+
+def test_the_report_writes_a_paragraph_and_a_table_for_each_section():
+    tables = {name: [] for _, _, name, _, _ in report.SECTIONS}
+    tables["same_math"] = [{"env": "E", "seed": "1", "dtype": "float64", "earlier_commit": "a", "commit": "b",
+                            "difference_at_update_1": "1e-15", "parted_at_update": 3}]  # fmt: skip
+    text = report.summary_text(tables)
+    assert text.count("\n## ") == len(report.SECTIONS)
+    assert "| E | 1 | float64 | a → b | 1e-15 | 3 |" in text
+    assert text.count("No complete record yet.") == len(report.SECTIONS) - 1
+
+
+def test_the_readme_shows_what_the_committed_records_say(tmp_path):
+    text = (common.ROOT / "README.md").read_text()
+    tables = scoring.score_all(folder=tmp_path)  # the committed tables are not touched
+    blocks = report.readme_blocks(tables, read_rows(common.RESULTS / "speed.csv"))
+    assert set(blocks) == {"mujoco", "speed", "table1"}
+    assert report.fill_readme(text, blocks) == text, "run `python -m benchmarks.report`"
+    for path in tmp_path.iterdir():  # and the committed tables are what the records give
+        assert path.read_text() == (scoring.TABLES / path.name).read_text(), f"{path.name}: run the report"
+
+
+def test_readme_blocks_are_replaced_and_a_missing_block_is_named():
+    text = "intro\n<!-- summary:speed -->\nold\nlines\n<!-- /summary:speed -->\nrest\n"
+    expected = "intro\n<!-- summary:speed -->\nnew\n<!-- /summary:speed -->\nrest\n"
+    assert report.fill_readme(text, {"speed": "new"}) == expected
+    with pytest.raises(ValueError, match="table1"):
+        report.fill_readme(text, {"table1": "x"})

@@ -1,64 +1,45 @@
-"""minippo beside Stable-Baselines3 (benchmarks/peers.py): the summary's statistics on hand-computed numbers, the
-record's rows, SB3's settings as translated from minippo's Config, and one real tiny run of each library through the
+"""minippo beside Stable-Baselines3 (benchmarks/peers.py): the scored table on hand-computed numbers, the record's
+rows, SB3's settings as translated from minippo's Config, and one real tiny run of each library through the
 sweep engine (skipped when Stable-Baselines3 or Ray is not installed)."""
 
 import importlib.util
 import math
-import sys
-from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "benchmarks"))
-
-import peers  # noqa: E402
-import records  # noqa: E402
-import summary  # noqa: E402
-
-from minippo.optimizer import linear_schedule  # noqa: E402
-from minippo.ppo import Config  # noqa: E402
+from benchmarks import common, peers, report, scoring
+from minippo.optimizer import linear_schedule
+from minippo.ppo import Config
+from minippo.records import append_row, read_rows
 
 # the statistics
-
-
-def test_t_quantiles_match_the_tables():
-    # Student's t, 97.5% points (any printed table; scipy.stats.t.ppf(0.975, df) gives the same digits)
-    assert summary.t_quantile(0.975, 1) == pytest.approx(12.706204736, rel=1e-9)
-    assert summary.t_quantile(0.975, 4) == pytest.approx(2.776445105, rel=1e-9)
-    assert summary.t_quantile(0.975, 10) == pytest.approx(2.228138852, rel=1e-9)
-    assert summary.t_quantile(0.975, 1e7) == pytest.approx(1.959964, rel=1e-6)  # the normal's, as df → ∞
-    assert summary.t_quantile(0.025, 4) == pytest.approx(-2.776445105, rel=1e-9)
-    assert summary.t_cdf(0.0, 3.5) == pytest.approx(0.5)
-    assert summary.t_cdf(2.776445105, 4) == pytest.approx(0.975, abs=1e-9)
 
 
 def test_welch_interval_by_hand():
     # Equal sizes and variances, where Welch's df is a whole number. a = 10, 12, 14: mean 12, s² = 4;
     # b = 4, 6, 8: mean 6, s² = 4. se² = 4/3 + 4/3 = 8/3, se = 1.6329932. df = (8/3)² / (2 · (4/3)²/2) = 4.
     # t(0.975, 4) = 2.7764451 (from the table), half-width 2.7764451 · 1.6329932 = 4.5339159: 6 ± 4.5339159.
-    interval = summary.welch_interval([10, 12, 14], [4, 6, 8])
-    assert interval["diff"] == 6 and interval["df"] == pytest.approx(4)
+    interval = scoring.welch_interval([10, 12, 14], [4, 6, 8])
+    assert interval["diff"] == 6
     assert interval["se"] == pytest.approx(math.sqrt(8 / 3))
     assert (interval["low"], interval["high"]) == pytest.approx((1.4660841, 10.5339159), abs=1e-7)
-    assert summary.standing(interval) == "ahead"
+    assert interval["standing"] == "ahead"
 
     # Unequal sizes, a fractional df. a = 3, 4, 5: mean 4, s² = 1, s²/n = 1/3; b = 1, 2: mean 1.5, s² = 1/2,
     # s²/n = 1/4. se² = 7/12, se = 0.7637626. df = (7/12)² / ((1/3)²/2 + (1/4)²/1) = (49/144) / (17/144) = 49/17
     # = 2.8823529. t(0.975, 49/17) = 3.2572081 (scipy.stats.t.ppf(0.975, 49/17), computed once); half-width
     # 3.2572081 · 0.7637626 = 2.4877338: 2.5 ± 2.4877338 = [0.0122662, 4.9877338], which just excludes 0
     # (scipy.stats.ttest_ind(a, b, equal_var=False).confidence_interval() gives the same).
-    interval = summary.welch_interval([3, 4, 5], [1, 2])
-    assert interval["df"] == pytest.approx(49 / 17)
+    interval = scoring.welch_interval([3, 4, 5], [1, 2])
     assert (interval["low"], interval["high"]) == pytest.approx((0.0122662, 4.9877338), abs=1e-7)
-    assert summary.standing(interval) == "ahead"
-    swapped = summary.welch_interval([1, 2], [3, 4, 5])
+    assert interval["standing"] == "ahead"
+    swapped = scoring.welch_interval([1, 2], [3, 4, 5])
     assert (swapped["low"], swapped["high"]) == pytest.approx((-4.9877338, -0.0122662), abs=1e-7)
-    assert summary.standing(swapped) == "behind"
-    assert summary.standing(summary.welch_interval([1, 2, 3], [2, 3, 4])) == "level"
+    assert swapped["standing"] == "behind"
+    assert scoring.welch_interval([1, 2, 3], [2, 3, 4])["standing"] == "level"
     with pytest.raises(ValueError):
-        summary.welch_interval([1.0], [1.0, 2.0])
+        scoring.welch_interval([1.0], [1.0, 2.0])
 
 
 def peer_record(library, task, seed, train, evaluation, wall_s=600.0, steps=999_424):
@@ -76,50 +57,24 @@ def peer_record(library, task, seed, train, evaluation, wall_s=600.0, steps=999_
     }
 
 
-def test_peers_table_and_sentences(tmp_path):
+def test_the_peers_table(tmp_path):
     rows = [
         *(peer_record("minippo", "Hopper-v5", seed, v, 2 * v, 120) for seed, v in zip((1, 2, 3), (3000, 4000, 5000))),
         *(peer_record("sb3", "Hopper-v5", seed, v, 2 * v, 600) for seed, v in zip((1, 2), (1000, 2000))),
-        peer_record("minippo", "Walker2d-v5", 1, 3000, 3100),
+        peer_record("minippo", "Walker2d-v5", 1, 3000, 3100),  # one seed each: not compared
         peer_record("sb3", "Walker2d-v5", 1, 2000, 2100),
     ]
-    stats = summary.peers_stats(rows)
-    assert list(stats) == [("Hopper-v5", 999_424), ("Walker2d-v5", 999_424)]  # the runner's task order
-    hopper = stats[("Hopper-v5", 999_424)]
-    mine = hopper["libraries"]["minippo"]["scores"]["return_mean"]
-    assert mine["mean"] == 4000 and mine["se"] == pytest.approx(1000 / math.sqrt(3))
-    assert hopper["libraries"]["sb3"]["minutes"] == 10
+    train, evaluation = scoring.peers(rows)
+    assert (train["task"], train["score"], evaluation["score"]) == ("Hopper-v5", "train", "eval")
+    assert train["minippo_mean"] == 4000 and train["minippo_se"] == pytest.approx(round(1000 / math.sqrt(3), 1))
+    assert (train["sb3_mean"], train["sb3_se"], train["seeds"]) == (1500, 500, "3/2")
+    assert (train["sb3_minutes"], train["minippo_minutes"]) == (10.0, 2.0)
     # the hand-computed interval above, ×1000 (train) and ×2000 (eval)
-    train = hopper["compared"]["return_mean"]
-    assert (train["low"], train["high"]) == pytest.approx((12.2662, 4987.7338), abs=1e-4)
-    assert hopper["compared"]["eval_mean"]["low"] == pytest.approx(24.5324, abs=1e-4)
-    assert stats[("Walker2d-v5", 999_424)]["compared"]["return_mean"] is None
-
-    lines = summary.peers_lines(rows)
-    table = [line for line in lines if line.startswith("| Hopper-v5")]
-    assert table[0] == (
-        "| Hopper-v5 | 999,424 | train | 4,000 ± 577 (n = 3) | 1,500 ± 500 (n = 2) | +2,500 [+12, +4,988] | ahead "
-        "| 2.0 / 10.0 |"
-    )
-    assert table[1].startswith("| Hopper-v5 | 999,424 | eval | 8,000 ± 1,155 (n = 3) | 3,000 ± 1,000 (n = 2) |")
-    assert summary.number(-572.4, 0, True) == "\u2212572" and summary.number(-1234.5, 1) == "\u22121,234.5"
-    walker = "| Walker2d-v5 | 999,424 | train | 3,000 (n = 1) | 2,000 (n = 1) | — | incomplete | 10.0 / 10.0 |"
-    assert walker in lines
-    text = "\n".join(lines)
-    assert "Hopper-v5, 999,424 steps (minippo 3 seeds, SB3 2 seeds): minippo is ahead of SB3 at equal steps" in text
-    assert "Walker2d-v5, 999,424 steps: incomplete (minippo 1 seed, SB3 1 seed;" in text
-
-    results = tmp_path / "results"
-    results.mkdir()
-    assert "No side-by-side runs are recorded yet" in summary.build(results, tmp_path / "runs")[0]
-    records.append_row(results / "peers.csv", peers.FIELDS, rows[0])
-    text = summary.build(results, tmp_path / "runs")[0]
-    assert (
-        "## Side by side with Stable-Baselines3" in text and "| Hopper-v5 | 999,424 | train | 3,000 (n = 1) |" in text
-    )
+    assert (train["diff"], train["low"], train["high"]) == (2500.0, 12.3, 4987.7)
+    assert evaluation["low"] == pytest.approx(24.5) and train["standing"] == evaluation["standing"] == "ahead"
 
 
-def test_the_curves_figure_draws_each_librarys_seeds_and_skips_an_empty_record(tmp_path):
+def test_the_curves_figure_draws_each_librarys_seeds(tmp_path):
     runs = tmp_path / "runs"
     drawn = []
     for library, level in (("minippo", 100.0), ("sb3", 50.0)):
@@ -140,13 +95,12 @@ def test_the_curves_figure_draws_each_librarys_seeds_and_skips_an_empty_record(t
 
     matplotlib.axes.Axes.plot = spy
     try:
-        out = summary.plot_peers(rows, runs, tmp_path / "peers_curves.png")
+        report.figure_peers(rows, tmp_path / "peers_curves.png", runs)
     finally:
         matplotlib.axes.Axes.plot = original
-    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (tmp_path / "peers_curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # the mean over the two seeds (seed adds 1 or 2) at the first and the last update
-    assert drawn == [("minippo, 2 seeds", 2048.0, 101.5, 501.5), ("SB3, 2 seeds", 2048.0, 51.5, 251.5)]
-    assert summary.plot_peers([], runs, tmp_path / "none.png") is None and not (tmp_path / "none.png").exists()
+    assert drawn == [("minippo, 2 seeds", 2048.0, 101.5, 501.5), ("sb3, 2 seeds", 2048.0, 51.5, 251.5)]
 
 
 # the runner: runs, rows, settings
@@ -160,10 +114,10 @@ def test_runs_alternate_libraries_and_name_their_command():
         "minippo-Hopper-v5-seed2",
         "sb3-Hopper-v5-seed2",
     ]
-    assert runs[1].labels == {"library": "sb3", "task": "Hopper-v5", "seed": 1} and runs[1].task is peers.sb3_run
-    assert runs[0].task is peers.minippo_run and runs[0].config == Config(env_id="Hopper-v5", seed=1)
+    assert runs[1].labels == {"library": "sb3", "task": "Hopper-v5", "seed": 1}
+    assert runs[0].config == Config(env_id="Hopper-v5", seed=1) and peers.PeerSweep.task is peers.peer_run
     assert runs[1].command("benchmarks/runs/peers") == (
-        "python benchmarks/peers.py --libraries sb3 --tasks Hopper-v5 --seeds 1 --steps 1000000"
+        "python -m benchmarks.peers --libraries sb3 --tasks Hopper-v5 --seeds 1 --steps 1000000"
     )
     assert runs[0].command("/tmp/elsewhere").endswith("--steps 1000000 --runs /tmp/elsewhere")
 
@@ -254,7 +208,7 @@ def test_a_tiny_run_of_each_library_through_the_engine(tmp_path, ray_here):
     record, runs = tmp_path / "peers.csv", tmp_path / "runs"
     argv = ["--tasks", "Pendulum-v1", "--seeds", "1", "--steps", "4096", "--csv", str(record), "--runs", str(runs)]
     assert peers.main([*argv, "--workers", "2", "--quiet"]) == 0
-    rows = records.read_rows(record)
+    rows = read_rows(record)
     assert [row["library"] for row in rows] in (["minippo", "sb3"], ["sb3", "minippo"])  # as they finish
     for row in rows:
         assert list(row) == peers.FIELDS
@@ -263,27 +217,27 @@ def test_a_tiny_run_of_each_library_through_the_engine(tmp_path, ray_here):
         assert -2000 < float(row["return_mean"]) < 0 and -2000 < float(row["eval_mean"]) < 0
         assert float(row["wall_s"]) > 0 and row["commit"] == peers.code_commit()
         assert row["command"] == (
-            f"python benchmarks/peers.py --libraries {row['library']} --tasks Pendulum-v1 --seeds 1 --steps 4096 "
-            f"--runs {records.relative(runs)}"
+            f"python -m benchmarks.peers --libraries {row['library']} --tasks Pendulum-v1 --seeds 1 --steps 4096 "
+            f"--runs {common.relative(runs)}"
         )
     versions = {row["library"]: row["version"] for row in rows}
     assert versions["minippo"].startswith("minippo ") and versions["sb3"].startswith("stable-baselines3 ")
     # both ran two updates with the same step sizes, minippo's linear annealing
-    mine = records.read_rows(runs / "minippo-Pendulum-v1-seed1" / "progress.csv")
-    theirs = records.read_rows(runs / "sb3-Pendulum-v1-seed1" / "progress.csv")
+    mine = read_rows(runs / "minippo-Pendulum-v1-seed1" / "progress.csv")
+    theirs = read_rows(runs / "sb3-Pendulum-v1-seed1" / "progress.csv")
     assert [row["step"] for row in mine] == [row["step"] for row in theirs] == ["2048", "4096"]
     assert [float(row["lr"]) for row in theirs] == pytest.approx([float(row["lr"]) for row in mine]) == [3e-4, 1.5e-4]
     assert (runs / "sb3-Pendulum-v1-seed1" / "config.json").exists()
     assert (runs / "minippo-Pendulum-v1-seed1" / "policy.npz").exists()
-    log = records.read_rows(runs / "sweep.csv")
+    log = read_rows(runs / "sweep.csv")
     assert sorted((row["library"], row["status"]) for row in log) == [("minippo", "ok"), ("sb3", "ok")]
     # recorded runs are skipped: the same command does nothing more
-    assert peers.main([*argv, "--quiet"]) == 0 and len(records.read_rows(record)) == 2
+    assert peers.main([*argv, "--quiet"]) == 0 and len(read_rows(record)) == 2
 
 
 def test_the_list_shows_recorded_and_left_runs(tmp_path, capsys):
     record = tmp_path / "peers.csv"
-    records.append_row(record, peers.FIELDS, peer_record("sb3", "Hopper-v5", 1, 1234.5, 1500))
+    append_row(record, peers.FIELDS, peer_record("sb3", "Hopper-v5", 1, 1234.5, 1500))
     assert peers.main(["--tasks", "Hopper-v5", "--seeds", "1", "--csv", str(record), "--list"]) == 0
     out = capsys.readouterr().out.splitlines()
     assert out[0].startswith("to do     minippo  Hopper-v5") and out[1].startswith("recorded  sb3      Hopper-v5")
@@ -298,7 +252,7 @@ def test_a_missing_sb3_is_named_with_its_install_command(monkeypatch, capsys):
 
 
 def test_the_peer_sweep_logs_and_records_its_own_columns(tmp_path):
-    args = SimpleNamespace(workers=None, address=None, retries=0, quiet=True)  # as records.add_sweep_options gives
+    args = SimpleNamespace(workers=None, address=None, retries=0, quiet=True)  # as common.add_sweep_options gives
     job = peers.PeerSweep(peers.sweep_runs(["Hopper-v5"], [1], 4096), tmp_path / "runs", tmp_path / "peers.csv", args)
-    assert job.fields[:4] == ["library", "task", "seed", "steps"] and job.record.fields == peers.FIELDS
+    assert job.fields[:4] == ["library", "task", "seed", "steps"] and job.record_csv == tmp_path / "peers.csv"
     assert job.csv_path == tmp_path / "runs" / "sweep.csv" and job.commit == peers.code_commit()
