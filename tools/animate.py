@@ -1,6 +1,6 @@
 """An animation of a trained policy for the book, through minippo's own evaluation (``minippo.evaluate.evaluate``).
 
-    MUJOCO_GL=egl python benchmarks/animate.py benchmarks/runs/mujoco/Hopper-v5-seed2 book/_static/media/hopper.gif
+    MUJOCO_GL=egl python tools/animate.py benchmarks/runs/mujoco/Hopper-v5-seed2 book/_static/media/hopper.gif
 
 Same as ``minippo eval RUN --episodes 1 --gif OUT`` (the deterministic policy, first episode, reset seed 0), with the
 frame spacing chosen for GIF players: a GIF stores delays in hundredths of a second and browsers slow delays of

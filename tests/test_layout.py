@@ -1,0 +1,67 @@
+"""The library and the lab apart: minippo imports nothing of the benchmarks and has no import cycle, no benchmark
+file or page edits sys.path to reach another, and importing minippo changes nothing in the process."""
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def imports_of(path: Path) -> set[str]:
+    """The modules a file imports, as written (``from minippo import losses`` counts as minippo.losses)."""
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            names |= {alias.name for alias in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names.add(node.module)
+            names |= {f"{node.module}.{alias.name}" for alias in node.names}
+    return names
+
+
+def test_minippo_has_no_import_cycle_and_imports_no_benchmark():
+    modules = {f"minippo.{path.stem}": path for path in (ROOT / "minippo").glob("*.py") if path.stem != "__init__"}
+    graph = {name: {other for other in imports_of(path) if other in modules} for name, path in modules.items()}
+    assert not any(name.startswith("benchmarks") for path in modules.values() for name in imports_of(path))
+
+    def visit(name, trail):
+        assert name not in trail, "import cycle: " + " -> ".join([*trail, name])
+        for other in graph[name]:
+            visit(other, [*trail, name])
+
+    for name in graph:
+        visit(name, [])
+
+
+def test_a_cycle_would_be_seen(tmp_path):
+    (tmp_path / "a.py").write_text("from minippo import b\n")
+    assert "minippo.b" in imports_of(tmp_path / "a.py")
+
+
+def test_no_benchmark_file_or_page_edits_sys_path():
+    files = [*(ROOT / "benchmarks").rglob("*.py"), *(ROOT / "book").glob("*.md"), ROOT / "book" / "_pages.py"]
+    offenders = [str(path.relative_to(ROOT)) for path in files if "sys.path.insert" in path.read_text()]
+    assert offenders == []
+
+
+def test_importing_minippo_sets_no_environment_variable_and_no_thread_limit():
+    probe = (
+        "import os, numpy, gymnasium, mujoco, matplotlib.pyplot, tqdm, threadpoolctl;"  # what they set themselves
+        "from threadpoolctl import threadpool_info; before = dict(os.environ);"
+        "threads = [p['num_threads'] for p in threadpool_info()]; import minippo, minippo.envs, minippo.cli;"
+        "assert dict(os.environ) == before, set(os.environ) ^ set(before);"
+        "assert [p['num_threads'] for p in threadpool_info()] == threads"
+    )
+    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(ROOT)}
+    result = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+
+
+def test_one_version_string():
+    import minippo
+
+    text = (ROOT / "pyproject.toml").read_text()
+    assert 'dynamic = ["version"]' in text and "minippo.__version__" in text
+    assert minippo.__version__.count(".") == 2
