@@ -130,20 +130,15 @@ def minippo_run(config_dict: dict, name: str = "", board=None) -> dict:
     return result
 
 
-def sb3_run(config_dict: dict, name: str = "", board=None) -> dict:
-    """Stable-Baselines3 PPO with ``sb3_settings(config)``, one torch thread, then the same deterministic evaluation
-    as minippo's. Its progress.csv has minippo's columns where SB3 has the number (one row per update)."""
-    import numpy as np
-    import stable_baselines3
+def sb3_model(config: Config):
+    """Stable-Baselines3's PPO and its VecNormalize environment, made from ``sb3_settings(config)`` (one torch
+    thread); the speed race uses it too."""
     import torch
     from stable_baselines3 import PPO
-    from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import VecNormalize
-    from threadpoolctl import threadpool_limits
 
     torch.set_num_threads(1)
-    config = Config.from_dict(config_dict)
     settings = sb3_settings(config)
     kwargs = dict(settings["ppo"])
     rate = kwargs["learning_rate"]
@@ -151,9 +146,23 @@ def sb3_run(config_dict: dict, name: str = "", board=None) -> dict:
         kwargs["learning_rate"] = lambda progress_remaining: rate["initial"] * (progress_remaining + rate["plus"])
     else:
         kwargs["learning_rate"] = rate["initial"]
-    policy_kwargs = dict(kwargs["policy_kwargs"])
-    policy_kwargs["activation_fn"] = {"tanh": torch.nn.Tanh}[policy_kwargs["activation_fn"]]
-    kwargs["policy_kwargs"] = policy_kwargs
+    kwargs["policy_kwargs"] = {**kwargs["policy_kwargs"], "activation_fn": torch.nn.Tanh}
+    env = VecNormalize(make_vec_env(config.env_id, settings["n_envs"], config.seed), **settings["vec_normalize"])
+    return PPO("MlpPolicy", env, verbose=0, **kwargs), env
+
+
+def sb3_run(config_dict: dict, name: str = "", board=None) -> dict:
+    """Stable-Baselines3 PPO with ``sb3_settings(config)``, one torch thread, then the same deterministic evaluation
+    as minippo's. Its progress.csv has minippo's columns where SB3 has the number (one row per update)."""
+    import numpy as np
+    import stable_baselines3
+    import torch
+    from stable_baselines3.common.callbacks import BaseCallback
+    from threadpoolctl import threadpool_limits
+
+    config = Config.from_dict(config_dict)
+    settings = sb3_settings(config)
+    rate = settings["ppo"]["learning_rate"]
     total = settings["total_timesteps"]
     rows: list[dict] = []
 
@@ -192,10 +201,7 @@ def sb3_run(config_dict: dict, name: str = "", board=None) -> dict:
                 board.report.remote(name, row["step"], total, row["return_mean"])
 
     with threadpool_limits(1):
-        env = VecNormalize(
-            make_vec_env(config.env_id, n_envs=settings["n_envs"], seed=config.seed), **settings["vec_normalize"]
-        )
-        model = PPO("MlpPolicy", env, verbose=0, **kwargs)
+        model, env = sb3_model(config)
         progress = Progress()
         model.learn(total_timesteps=total, callback=progress)
         progress.flush()

@@ -7,10 +7,9 @@ Each round measures, one after the other:
              trainer has to step the environment too;
   minippo    training throughput with the paper's settings (T = 2048, K = 10, minibatch 64, Config defaults):
              ``--updates`` updates after one warm-up update, through the Python API (``minippo.ppo.Trainer``);
-  sb3        Stable-Baselines3 PPO with the same settings (n_steps 2048, batch_size 64, n_epochs 10, lr 3e-4,
-             γ 0.99, λ 0.95, clip 0.2, 64-64 tanh MLPs, observation and reward normalisation by VecNormalize),
-             one env, ``torch.set_num_threads(1)``, device cpu, after one warm-up rollout and update; skipped and
-             recorded as skipped when it is not installed.
+  sb3        Stable-Baselines3 PPO with the same settings, translated from minippo's Config as the side-by-side
+             benchmark translates them (``peers.sb3_model``), one env, one torch thread, device cpu, after one
+             warm-up rollout and update; skipped and recorded as skipped when it is not installed.
 Both trainers get one math thread (OpenBLAS for NumPy, torch's intra-op pool for SB3). The rounds are interleaved
 so that a change in the machine's load hits all three; the table keeps each round and reports the median.
 Run it while no training is running: it wants the cores to itself, and the 1-minute load average goes in the CSV.
@@ -90,31 +89,10 @@ class MinippoContender:
 
 class StableBaselinesContender:
     def __init__(self, env_id: str, seed: int):
-        import torch
-        from stable_baselines3 import PPO
-        from stable_baselines3.common.env_util import make_vec_env
-        from stable_baselines3.common.vec_env import VecNormalize
+        from benchmarks.peers import sb3_model
+        from minippo.ppo import Config
 
-        torch.set_num_threads(1)
-        env = VecNormalize(make_vec_env(env_id, n_envs=1, seed=seed), gamma=0.99, clip_obs=10.0, clip_reward=10.0)
-        self.model = PPO(
-            "MlpPolicy",
-            env,
-            n_steps=2048,
-            batch_size=64,
-            n_epochs=10,
-            learning_rate=3e-4,
-            gamma=0.99,
-            gae_lambda=0.95,
-            clip_range=0.2,
-            ent_coef=0.0,
-            vf_coef=0.5,
-            max_grad_norm=0.5,
-            policy_kwargs={"net_arch": {"pi": [64, 64], "vf": [64, 64]}, "activation_fn": torch.nn.Tanh},
-            device="cpu",
-            seed=seed,
-            verbose=0,
-        )
+        self.model, _ = sb3_model(Config(env_id=env_id, seed=seed, total_steps=1_000_000))  # the peers' settings
         self.model.learn(total_timesteps=2048)  # warm-up: one rollout and one update
 
     def measure(self, updates: int) -> tuple[float, int]:

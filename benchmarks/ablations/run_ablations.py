@@ -1,8 +1,7 @@
 """Chapter 10's ablations: every implementation detail of minippo switched off, one at a time, against the defaults.
 
-Each run goes through the minippo command line, one training at a time (the machine has two cores and other work),
-and leaves its config.json and progress.csv in ``runs/<ablation>-seed<S>/`` beside this file. Every finished run
-appends one row to ``results.csv`` with the exact command that produced it, so the book can quote it. Runs already
+Each run goes through the minippo command line, one training at a time, and leaves its config.json and progress.csv
+in ``runs/<ablation>-seed<S>/`` beside this file. Every finished run appends one row to ``results.csv`` with the exact command that produced it, so the book can quote it. Runs already
 in results.csv are skipped, so the script can be stopped and started again.
 
     python benchmarks/ablations/run_ablations.py              # all ablations, seeds 1 and 2, Hopper-v5, 163,840 steps
@@ -13,12 +12,13 @@ in results.csv are skipped, so the script can be stopped and started again.
 from __future__ import annotations
 
 import argparse
-import csv
 import hashlib
 import shlex
 import subprocess
 import sys
 from pathlib import Path
+
+from minippo.records import append_row, commit_of_code, read_rows
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
@@ -68,16 +68,7 @@ def command_for(ablation: str, env: str, steps: int, seed: int) -> list[str]:
 
 
 def recorded() -> set[tuple[str, str, int, int]]:
-    if not RESULTS.exists():
-        return set()
-    with open(RESULTS, newline="") as handle:
-        return {(r["ablation"], r["env"], int(r["seed"]), int(r["steps"])) for r in csv.DictReader(handle)}
-
-
-def git_commit() -> str:
-    head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True)
-    clean = subprocess.run(["git", "diff", "--quiet", "HEAD", "--", "minippo"], cwd=ROOT).returncode == 0
-    return head.stdout.strip() + ("" if clean else "+local-changes")
+    return {(r["ablation"], r["env"], int(r["seed"]), int(r["steps"])) for r in read_rows(RESULTS)}
 
 
 def source_digest() -> str:
@@ -88,14 +79,9 @@ def source_digest() -> str:
     return digest.hexdigest()
 
 
-def read_rows(run_dir: Path) -> list[dict]:
-    with open(run_dir / "progress.csv", newline="") as handle:
-        return list(csv.DictReader(handle))
-
-
 def run_one(ablation: str, env: str, steps: int, seed: int) -> dict:
     command = command_for(ablation, env, steps, seed)
-    commit, digest = git_commit(), source_digest()
+    commit, digest = commit_of_code(root=ROOT), source_digest()
     result = subprocess.run(command, cwd=ROOT, capture_output=True, text=True)
     if result.returncode != 0:
         message = (result.stderr.strip().splitlines() or ["no message"])[-1]
@@ -103,7 +89,7 @@ def run_one(ablation: str, env: str, steps: int, seed: int) -> dict:
     if source_digest() != digest:
         raise RuntimeError(f"minippo's source changed during {ablation} seed {seed}; run the script again")
     run_dir = ROOT / command[command.index("--out") + 1]
-    rows = read_rows(run_dir)
+    rows = read_rows(run_dir / "progress.csv")
     for name in ("checkpoint.npz", "policy.npz", "curve.png"):  # the record is config.json + progress.csv
         (run_dir / name).unlink(missing_ok=True)
     last = rows[-1]
@@ -121,15 +107,6 @@ def run_one(ablation: str, env: str, steps: int, seed: int) -> dict:
         "commit": commit,
         "command": shlex.join(command),
     }
-
-
-def append(row: dict) -> None:
-    new = not RESULTS.exists()
-    with open(RESULTS, "a", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=FIELDS)
-        if new:
-            writer.writeheader()
-        writer.writerow(row)
 
 
 def main(argv=None) -> int:
@@ -161,7 +138,7 @@ def main(argv=None) -> int:
             except RuntimeError as error:
                 print(f"run_ablations: error: {error}", file=sys.stderr)
                 return 1
-            append(row)
+            append_row(RESULTS, FIELDS, row)
             print(f"{name} seed {seed}: return {row['return_mean']:.1f} after {row['steps']} steps", flush=True)
     return 0
 
