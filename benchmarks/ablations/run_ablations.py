@@ -1,8 +1,9 @@
 """Chapter 10's ablations: every implementation detail of minippo switched off, one at a time, against the defaults.
 
 Each run goes through the minippo command line, one training at a time, and leaves its config.json and progress.csv
-in ``runs/<ablation>-seed<S>/`` beside this file. Every finished run appends one row to ``results.csv`` with the exact command that produced it, so the book can quote it. Runs already
-in results.csv are skipped, so the script can be stopped and started again.
+in ``runs/<ablation>-seed<S>/`` beside this file. Every finished run appends one row to ``results.csv`` with the
+exact command that produced it, so the book can quote it. Runs already in results.csv are skipped, so the script can
+be stopped and started again.
 
     python benchmarks/ablations/run_ablations.py              # all ablations, seeds 1 and 2, Hopper-v5, 163,840 steps
     python benchmarks/ablations/run_ablations.py --dry-run    # print the commands only
