@@ -228,11 +228,9 @@ def _logit_gradient(probs, grad_logp_row, s):
     return [grad_logp_row[j] - probs[s][j] * total for j in range(N_ACTIONS)]
 
 
-def cpi_objective(logits, snapshot):
-    """L^CPI (eq. 6) and its gradient with respect to the logits.
-
-    ∂L/∂ log π_θ(a|s) = d_old(s) π_old(a|s) r(s,a) Â(s,a) = d_old(s) π_θ(a|s) Â(s,a).
-    """
+def _surrogate(logits, snapshot, term):
+    """Σ_(s,a) w f(r, Â) and its gradient with respect to the logits, w = d_old(s) π_old(a|s), for a per-sample
+    ``term(w, r, Â)`` = (w f, w r ∂f/∂r), the value and ∂L/∂ log π_θ(a|s) (∂r/∂ log π_θ = r)."""
     probs = softmax_policy(logits)
     value = 0.0
     grad = []
@@ -241,10 +239,18 @@ def cpi_objective(logits, snapshot):
         for a in range(N_ACTIONS):
             weight = snapshot.visitation[s] * snapshot.probs[s][a]
             ratio = probs[s][a] / snapshot.probs[s][a]
-            value += weight * ratio * snapshot.advantages[s][a]
-            row.append(weight * ratio * snapshot.advantages[s][a])
+            weighted, slope = term(weight, ratio, snapshot.advantages[s][a])
+            value += weighted
+            row.append(slope)
         grad.append(_logit_gradient(probs, row, s))
     return value, grad
+
+
+def cpi_objective(logits, snapshot):
+    """L^CPI (eq. 6) and its gradient with respect to the logits: f = r Â, so
+    ∂L/∂ log π_θ(a|s) = d_old(s) π_old(a|s) r(s,a) Â(s,a) = d_old(s) π_θ(a|s) Â(s,a).
+    """
+    return _surrogate(logits, snapshot, lambda weight, ratio, advantage: (weight * ratio * advantage,) * 2)
 
 
 def clip_objective(logits, snapshot, epsilon):
@@ -253,25 +259,13 @@ def clip_objective(logits, snapshot, epsilon):
     The clipped term is flat in θ, so ∂L/∂ log π_θ(a|s) = d_old(s) π_old(a|s) r Â where r Â ≤ clip(r) Â (the
     unclipped term is the min) and 0 where the clipped term wins: r > 1+ε with Â > 0, or r < 1−ε with Â < 0.
     """
-    probs = softmax_policy(logits)
-    value = 0.0
-    grad = []
-    for s in range(N_STATES):
-        row = []
-        for a in range(N_ACTIONS):
-            weight = snapshot.visitation[s] * snapshot.probs[s][a]
-            ratio = probs[s][a] / snapshot.probs[s][a]
-            advantage = snapshot.advantages[s][a]
-            unclipped = ratio * advantage
-            clipped = min(max(ratio, 1.0 - epsilon), 1.0 + epsilon) * advantage
-            if unclipped <= clipped:
-                value += weight * unclipped
-                row.append(weight * unclipped)
-            else:
-                value += weight * clipped
-                row.append(0.0)
-        grad.append(_logit_gradient(probs, row, s))
-    return value, grad
+
+    def term(weight, ratio, advantage):
+        unclipped = ratio * advantage
+        clipped = min(max(ratio, 1.0 - epsilon), 1.0 + epsilon) * advantage
+        return (weight * unclipped,) * 2 if unclipped <= clipped else (weight * clipped, 0.0)
+
+    return _surrogate(logits, snapshot, term)
 
 
 def kl_penalty_objective(logits, snapshot, beta):

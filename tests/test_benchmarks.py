@@ -25,6 +25,12 @@ def table1_run(setting, env_id, seed, value, steps="4096"):
     return {"setting": setting, "env": env_id, "seed": str(seed), "steps": steps, "return_mean": str(value)}
 
 
+def recorded_run(setting, env_id, seed, value):
+    """A whole row of a Table 1 runs record, as the runner writes it."""
+    row = table1_run(setting, env_id, seed, value)
+    return {**row, "wall_s": 1, "steps_per_s": 1, "commit": "x", "command": "c"}
+
+
 def random_rows(env_ids, value="10"):
     """random.csv rows giving every task the same random-policy return."""
     return [{"env": env_id, "return_mean": value, "episodes": "100", "seed": "0"} for env_id in env_ids]
@@ -102,19 +108,7 @@ def test_write_table_keeps_the_paper_column_and_order(tmp_path):
     runs = []
     for name, _, _ in table1.SETTINGS:
         value = {"No clipping or penalty": 0.0, "Clipping, ε = 0.2": 200.0}.get(name, 100.0)
-        runs.append(
-            {
-                "setting": name,
-                "env": "A",
-                "seed": 1,
-                "steps": 4096,
-                "return_mean": value,
-                "wall_s": 1,
-                "steps_per_s": 1,
-                "commit": "x",
-                "command": "c",
-            }
-        )
+        runs.append(recorded_run(name, "A", 1, value))
     write_csv(tmp_path / "runs.csv", runs)
     write_csv(tmp_path / "random.csv", [{"env": "A", "episodes": 100, "seed": 0, "return_mean": 0.0}])
     table = table1.write_table(tmp_path / "runs.csv", tmp_path / "random.csv", tmp_path / "t.csv", ["A"], [1], 5000)
@@ -126,19 +120,7 @@ def test_write_table_keeps_the_paper_column_and_order(tmp_path):
 
 
 def test_write_table_scores_only_the_tasks_whose_runs_are_all_recorded(tmp_path):
-    def run(setting, env_id, seed, value):
-        return {
-            "setting": setting,
-            "env": env_id,
-            "seed": seed,
-            "steps": 4096,
-            "return_mean": value,
-            "wall_s": 1,
-            "steps_per_s": 1,
-            "commit": "x",
-            "command": "c",
-        }
-
+    run = recorded_run
     clip, cpi = "Clipping, ε = 0.2", "No clipping or penalty"
     runs = [run(clip, "A", 1, 100.0), run(cpi, "A", 1, 50.0), run(clip, "A", 2, 80.0), run(cpi, "A", 2, 40.0)]
     runs += [run(clip, "B", 1, 10.0)]  # B is still running: its best run may not have come yet

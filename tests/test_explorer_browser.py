@@ -11,32 +11,20 @@ To try the explorer on other built HTML without building the book, point MINIPPO
 
 from __future__ import annotations
 
-import functools
-import http.server
 import os
 import re
-import shutil
-import tempfile
-import threading
 import time
 from pathlib import Path
 
 import pytest
+from _browser import chromium, serve
 
 from minippo import corridor as cd
 
 # the first test may build the whole book (the built_book fixture); every wait below has its own, shorter limit
 pytestmark = pytest.mark.timeout(1500)
 
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMEDRIVER = Path("/usr/bin/chromedriver")
 PAGE = "05-clipping.html"
-
-
-def missing(reason: str):
-    if os.environ.get("CI") == "true":
-        pytest.fail(f"the explorer's browser test cannot run in CI: {reason}")
-    pytest.skip(reason)
 
 
 @pytest.fixture(scope="module")
@@ -58,62 +46,16 @@ def explorer_page(html_dir: Path) -> str:
     pytest.fail(f'no page of the built book in {html_dir} embeds <div class="corridor-explorer">')
 
 
-class _Handler(http.server.SimpleHTTPRequestHandler):
-    def do_GET(self):  # noqa: N802 (the name http.server calls)
-        if self.path.split("?")[0] == "/favicon.ico" and not (Path(self.directory) / "favicon.ico").exists():
-            self.send_response(204)  # the browser asks for an icon by itself; a 404 would be logged as SEVERE
-            self.end_headers()
-            return
-        super().do_GET()
-
-    def log_message(self, *args):
-        pass
-
-
 @pytest.fixture(scope="module")
 def site(html_dir):
-    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), functools.partial(_Handler, directory=str(html_dir)))
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
-    try:
-        yield f"http://127.0.0.1:{server.server_port}/{explorer_page(html_dir)}"
-    finally:
-        server.shutdown()
-        server.server_close()
+    with serve(html_dir) as base:
+        yield base + explorer_page(html_dir)
 
 
 @pytest.fixture(scope="module")
 def browser():
-    if not CHROMIUM.exists() or not CHROMEDRIVER.exists():
-        missing(f"{CHROMIUM} or {CHROMEDRIVER} is not installed (apt-get install chromium chromium-driver)")
-    try:
-        from selenium import webdriver
-        from selenium.webdriver.chrome.service import Service
-    except ImportError:
-        missing("selenium is not installed (pip install -e '.[browser]')")
-    profile = tempfile.mkdtemp(prefix="minippo-chromium-")
-    options = webdriver.ChromeOptions()
-    options.binary_location = str(CHROMIUM)
-    for flag in (
-        "--headless",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--disable-dev-shm-usage",
-        "--disable-background-networking",
-        "--disable-component-update",
-        "--no-first-run",
-        "--disable-sync",
-        f"--user-data-dir={profile}",
-        "--window-size=1100,1600",
-    ):
-        options.add_argument(flag)
-    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
-    driver = webdriver.Chrome(service=Service(str(CHROMEDRIVER)), options=options)
-    try:
+    with chromium("the explorer's browser test", "1100,1600") as driver:
         yield driver
-    finally:
-        driver.quit()
-        shutil.rmtree(profile, ignore_errors=True)
 
 
 def severe_messages(driver):

@@ -10,29 +10,17 @@ To try another build without building the book, point MINIPPO_BOOK_HTML at its H
 
 from __future__ import annotations
 
-import functools
-import http.server
 import os
-import shutil
-import tempfile
-import threading
 import time
 from pathlib import Path
 
 import pytest
+from _browser import chromium, serve
 
 pytestmark = pytest.mark.timeout(1500)  # the first test may build the whole book
 
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMEDRIVER = Path("/usr/bin/chromedriver")
 PHONE, DESKTOP = (390, 844), (1400, 900)
 START, TARGET = "01-network.html", "05-clipping.html"
-
-
-def missing(reason: str):
-    if os.environ.get("CI") == "true":
-        pytest.fail(f"the navigation test cannot run in CI: {reason}")
-    pytest.skip(reason)
 
 
 @pytest.fixture(scope="module")
@@ -41,53 +29,16 @@ def html_dir(request) -> Path:
     return Path(override) if override else request.getfixturevalue("built_book")
 
 
-class _Quiet(http.server.SimpleHTTPRequestHandler):
-    def log_message(self, *args):
-        pass
-
-
 @pytest.fixture(scope="module")
 def site(html_dir):
-    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), functools.partial(_Quiet, directory=str(html_dir)))
-    threading.Thread(target=server.serve_forever, daemon=True).start()
-    try:
-        yield f"http://127.0.0.1:{server.server_port}/"
-    finally:
-        server.shutdown()
-        server.server_close()
+    with serve(html_dir) as base:
+        yield base
 
 
 @pytest.fixture(scope="module")
 def driver():
-    if not CHROMIUM.exists() or not CHROMEDRIVER.exists():
-        missing(f"{CHROMIUM} or {CHROMEDRIVER} is not installed (apt-get install chromium chromium-driver)")
-    try:
-        from selenium import webdriver
-        from selenium.webdriver.chrome.service import Service
-    except ImportError:
-        missing("selenium is not installed (pip install -e '.[test]')")
-    profile = tempfile.mkdtemp(prefix="minippo-chromium-")
-    options = webdriver.ChromeOptions()
-    options.binary_location = str(CHROMIUM)
-    for flag in (
-        "--headless",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--disable-dev-shm-usage",
-        "--disable-background-networking",
-        "--disable-component-update",
-        "--no-first-run",
-        "--disable-sync",
-        f"--user-data-dir={profile}",
-    ):
-        options.add_argument(flag)
-    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
-    chrome = webdriver.Chrome(service=Service(str(CHROMEDRIVER)), options=options)
-    try:
+    with chromium("the navigation test") as chrome:
         yield chrome
-    finally:
-        chrome.quit()
-        shutil.rmtree(profile, ignore_errors=True)
 
 
 def open_page(driver, url: str, size: tuple[int, int], mobile: bool):
