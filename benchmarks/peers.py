@@ -358,6 +358,29 @@ def check_tasks(tasks) -> None:
             common.fail(f"{env_id} has discrete actions; this comparison is set up for continuous control")
 
 
+def evaluate_record(runs_csv, runs_root, record_csv, tasks=TASKS) -> int:
+    """minippo's side of the comparison from runs another record made with the same command (the seven tasks'
+    campaign): each run of ``tasks`` in ``runs_csv`` gets minippo's deterministic evaluation of its final policy
+    (``runs_root/<task>-seed<S>/policy.npz``, as ``minippo eval RUN --episodes 10 --seed 0``) and one row in
+    ``record_csv`` with the run's own command and commit. Returns how many rows were added."""
+    from minippo.evaluate import evaluate
+
+    done = {(row["task"], row["seed"]) for row in read_rows(record_csv)}
+    added = 0
+    for run in read_rows(runs_csv):
+        if run["env"] not in tasks or (run["env"], run["seed"]) in done:
+            continue
+        folder = Path(runs_root) / f"{run['env']}-seed{run['seed']}"
+        if not (folder / "policy.npz").exists():
+            common.fail(f"no policy.npz in {folder}: the final policies stay on the machine that trained them")
+        returns = evaluate(folder, EVAL_EPISODES, EVAL_SEED)
+        row = {"library": "minippo", "version": minippo_version(), "task": run["env"], **run}
+        row["eval_mean"] = round(sum(returns) / len(returns), 2)
+        append_row(record_csv, FIELDS, row)
+        added += 1
+    return added
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--tasks", nargs="+", default=TASKS, metavar="TASK", help="Gymnasium ids (continuous actions)")
@@ -367,8 +390,13 @@ def main(argv=None) -> int:
     parser.add_argument("--csv", default=str(CSV_PATH), help="where to append the records")
     parser.add_argument("--runs", default=str(RUN_ROOT), help="the folder of run folders")
     parser.add_argument("--list", action="store_true", help="show what is recorded and what is left, then stop")
+    parser.add_argument("--evaluate", metavar="RUNS_CSV", help="record minippo's side from these runs (in --runs)")
     common.add_sweep_options(parser)
     args = parser.parse_args(argv)
+    if args.evaluate:
+        added = evaluate_record(args.evaluate, args.runs, args.csv, args.tasks)
+        print(f"{added} minippo runs evaluated -> {common.relative(args.csv)}")
+        return 0
     if args.steps < 2048:
         common.fail(f"--steps must be at least one horizon (2048), not {args.steps}")
     if len(set(args.seeds)) != len(args.seeds) or len(set(args.tasks)) != len(args.tasks):

@@ -256,3 +256,19 @@ def test_the_peer_sweep_logs_and_records_its_own_columns(tmp_path):
     job = peers.PeerSweep(peers.sweep_runs(["Hopper-v5"], [1], 4096), tmp_path / "runs", tmp_path / "peers.csv", args)
     assert job.fields[:4] == ["library", "task", "seed", "steps"] and job.record_csv == tmp_path / "peers.csv"
     assert job.csv_path == tmp_path / "runs" / "sweep.csv" and job.commit == peers.code_commit()
+
+
+def test_minippo_side_from_another_records_runs(tmp_path):
+    from minippo.ppo import train
+
+    folder = tmp_path / "runs" / "Pendulum-v1-seed1"
+    train(Config(env_id="Pendulum-v1", total_steps=2048, seed=1, horizon=1024), folder)
+    run = {"env": "Pendulum-v1", "seed": "1", "steps": "2048", "return_mean": "-1200.5", "wall_s": "3.0"}
+    run |= {"steps_per_s": "700", "commit": "abc", "command": "minippo train Pendulum-v1 ..."}
+    append_row(tmp_path / "runs.csv", list(run), run)
+    record = tmp_path / "peers.csv"
+    assert peers.evaluate_record(tmp_path / "runs.csv", tmp_path / "runs", record, ["Pendulum-v1"]) == 1
+    (row,) = read_rows(record)
+    assert list(row) == peers.FIELDS and row["library"] == "minippo" and row["command"] == run["command"]
+    assert -2000 < float(row["eval_mean"]) < 0 and row["return_mean"] == "-1200.5"
+    assert peers.evaluate_record(tmp_path / "runs.csv", tmp_path / "runs", record, ["Pendulum-v1"]) == 0  # once
