@@ -305,6 +305,8 @@ def main(argv=None) -> int:
             message = flag + message[len(error.field) :]
         elif error.field and message.startswith(error.field):
             message = f"--config {message}"
+        elif not error.field:
+            message = f"--config: {message}"
         print(f"minippo: error: {message}", file=sys.stderr)
         return 2
     except MinippoError as error:

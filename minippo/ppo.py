@@ -181,7 +181,7 @@ class Config:
         changes = {}
         for text in texts:
             if "=" not in text:
-                raise ConfigError("", f"an override is key=value, not '{text}'")
+                raise ConfigError("", f"'{text}' is not key=value")
             key, raw = text.split("=", 1)
             key = key.strip().replace("-", "_")
             changes[key] = self.parse_value(key, raw)
