@@ -380,3 +380,13 @@ def test_readme_blocks_are_replaced_and_a_missing_block_is_named():
     assert report.fill_readme(text, {"speed": "new"}) == expected
     with pytest.raises(ValueError, match="table1"):
         report.fill_readme(text, {"table1": "x"})
+
+
+def test_the_one_commit_rerun_reproduces_table1s_default_runs():
+    """The seven tasks at one commit, seeds 1-3, are the ε = 0.2 runs of Table 1's record, to the recorded digit:
+    the same command, the same machine kind, code that computes the same training."""
+    rerun = {(r["env"], r["seed"]): r for r in read_rows(common.RESULTS / "seven_tasks_runs.csv")}
+    table = [r for r in read_rows(common.RESULTS / "table1_1m_runs.csv") if r["setting"] == "Clipping, ε = 0.2"]
+    shared = [(row, rerun[(row["env"], row["seed"])]) for row in table if (row["env"], row["seed"]) in rerun]
+    assert len(shared) >= 12 and len({row["commit"] for _, row in shared}) == 1
+    assert all(old["return_mean"] == new["return_mean"] for old, new in shared)
