@@ -36,9 +36,9 @@ FIELDS += ["max_gradient_difference", "adam_steps", "max_parameter_difference", 
 def layers(theta, agent):
     """The (W, b) of every network of ``agent`` as views into the flat tensor θ, in minippo's order, and log σ."""
     nets, offset = {}, 0
-    for name, mlp in agent.nets.items():
+    for name, net in agent.nets.items():
         nets[name] = []
-        for fan_in, fan_out in zip(mlp.sizes[:-1], mlp.sizes[1:]):
+        for fan_in, fan_out in zip(net.sizes[:-1], net.sizes[1:]):
             W = theta[offset : offset + fan_in * fan_out].view(fan_in, fan_out)
             b = theta[offset + fan_in * fan_out : offset + fan_in * fan_out + fan_out]
             nets[name].append((W, b))
