@@ -42,7 +42,9 @@ def parse(path):
 
 
 def test_the_toc_names_the_course():
-    assert CHAPTERS[:3] == ["intro", "why-ppo", "notation"]  # the "why" page comes before chapter 1
+    # the "why" page, then PPO on one page, come before chapter 1
+    assert CHAPTERS[:4] == ["intro", "why-ppo", "ppo-on-one-page", "notation"]
+    assert {"pytorch-bridge", "glossary"} <= set(CHAPTERS)
     assert "references" in CHAPTERS
     assert len(NUMBERED) >= 12
 
@@ -104,3 +106,17 @@ def test_the_bibliography_lists_only_what_the_chapters_cite(built_book):
     page = (built_book / "references.html").read_text(encoding="utf-8")
     entries = re.findall(r'<div class="citation" id="id\d+"|<dt class="label" id="', page)
     assert len(entries) >= len(keys), f"the bibliography page shows {len(entries)} of {len(keys)} entries"
+
+
+@pytest.mark.timeout(1800)
+def test_the_glossary_defines_its_terms_and_every_term_is_linked_from_a_page(built_book):
+    glossary = (built_book / "glossary.html").read_text(encoding="utf-8")
+    terms = re.findall(r'<dt id="(term-[^"]+)"', glossary)
+    assert len(terms) >= 25, f"the glossary defines {len(terms)} terms"
+    linked = set()
+    for page in built_book.glob("*.html"):
+        if page.name != "glossary.html":
+            linked.update(re.findall(r'href="glossary\.html#(term-[^"]+)"', page.read_text(encoding="utf-8")))
+    assert not set(terms) - linked, f"glossary terms no page links to: {sorted(set(terms) - linked)}"
+    chapters_linking = [name for name in NUMBERED if "glossary.html#term-" in (built_book / f"{name}.html").read_text()]
+    assert len(chapters_linking) >= 8, chapters_linking
