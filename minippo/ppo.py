@@ -55,6 +55,7 @@ PROGRESS_FIELDS = [
     "steps_per_s",
     "wall_s",
 ]
+COUNTS = ("update", "step", "episodes")  # the integer columns of progress.csv
 
 
 @dataclass
@@ -418,7 +419,7 @@ def train(
                 table = io.StringIO(newline="")
                 writer = csv.DictWriter(table, fieldnames=PROGRESS_FIELDS)
                 writer.writeheader()
-                writer.writerows(rows)
+                writer.writerows(csv_row(row) for row in rows)
                 write_atomically(progress_path, lambda handle: handle.write(table.getvalue().encode()))
         while trainer.update < config.num_updates:
             row = trainer.run_update()
@@ -429,9 +430,7 @@ def train(
             if out is not None:
                 with run_files(out, trainer):
                     with open(progress_path, "a", newline="") as handle:
-                        csv.DictWriter(handle, fieldnames=PROGRESS_FIELDS).writerow(
-                            {k: (repr(v) if isinstance(v, float) else v) for k, v in row.items()}
-                        )
+                        csv.DictWriter(handle, fieldnames=PROGRESS_FIELDS).writerow(csv_row(row))
                     if checkpoint:
                         trainer.save_checkpoint(out)
                         if on_checkpoint is not None:
@@ -467,14 +466,22 @@ def checkpoint_update(out) -> int | None:
         return None
 
 
+def csv_row(row: dict) -> dict:
+    """A progress row as progress.csv holds it: floats by repr, which reads back to the same float."""
+    return {key: (repr(value) if isinstance(value, float) else value) for key, value in row.items()}
+
+
 def progress_until(path: Path, update: int) -> list[dict]:
-    """progress.csv's rows of updates 1 … ``update`` (the checkpoint's): the rows a killed run wrote after its last
-    checkpoint, and a row cut short by the kill, are dropped, to be written again."""
+    """progress.csv's rows of updates 1 … ``update`` (the checkpoint's), read back to the numbers they were written
+    from: the rows a killed run wrote after its last checkpoint, and a row cut short by the kill, are dropped."""
     try:
         with open(path, newline="") as handle:
             rows = list(csv.DictReader(handle))[:update]
+        rows = [{key: (int if key in COUNTS else float)(row[key]) for key in PROGRESS_FIELDS} for row in rows]
     except FileNotFoundError:
         rows = []
-    if [row.get("update") for row in rows] != [str(u) for u in range(1, update + 1)]:
+    except (KeyError, TypeError, ValueError):
+        rows = None
+    if rows is None or [row["update"] for row in rows] != list(range(1, update + 1)):
         raise MinippoError(f"{path} does not hold the rows of updates 1 to {update}, the checkpoint's; cannot resume")
     return rows
