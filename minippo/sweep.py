@@ -22,8 +22,9 @@ stopped after it, with one worker per core (``--workers N`` for fewer), listenin
 
 Safe to stop and start again: a run with an ``ok`` row in the CSV is skipped, so the same command resumes a sweep (a
 row of the same run made by another command, with other steps or settings, is refused: another sweep's CSV).
-A run that fails (an exception, or NaN/inf in the loss: ``NonFiniteError``) is tried again up to ``--retries`` more
-times, then recorded with status ``failed`` and its reason, and the sweep goes on; a later invocation tries it again.
+A run that fails (an exception, NaN/inf in the loss: ``NonFiniteError``, or a worker that dies) is tried again up to
+``--retries`` more times, from its last checkpoint (whose files the driver holds), then recorded with status
+``failed`` and its reason, and the sweep goes on; a later invocation tries it again.
 Ctrl-C records the runs already finished, stops the workers, and exits with 130.
 
 Ray is an optional dependency (``pip install -e ".[sweep]"``); nothing else in minippo imports it. The benchmark
