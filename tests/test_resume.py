@@ -14,6 +14,7 @@ import threading
 import time
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -325,3 +326,35 @@ def test_a_sweep_retries_a_killed_worker_s_run_from_its_checkpoint(ray_environme
     assert main(command[1:]) == 0
     assert_same_run(out / "CartPole-v1-seed2", alone)
     assert float(row["return_mean"]) == float(progress_without_clock(alone)[-1]["return_mean"])
+
+
+class Drift(gym.Env):
+    """A task minippo does not know how to save mid-episode (not one of Gymnasium's MuJoCo or classic-control ones)."""
+
+    observation_space = gym.spaces.Box(-np.inf, np.inf, (2,), np.float64)
+    action_space = gym.spaces.Discrete(2)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.position = self.np_random.normal(size=2)
+        return self.position.copy(), {}
+
+    def step(self, action):
+        self.position += self.np_random.normal(size=2) * 0.1 + (action - 0.5)
+        return self.position.copy(), -float(abs(self.position).sum()), bool(abs(self.position).max() > 3), False, {}
+
+
+def test_an_environment_that_cannot_be_saved_is_said_in_one_line_and_restarts(tmp_path, capsys):
+    gym.register("Drift-v0", entry_point=Drift, max_episode_steps=50)
+    out = tmp_path / "drift"
+    argv = ["train", "Drift-v0", "--steps", "256", "--out", str(out), "--quiet", "--config", "horizon=128", "epochs=1"]
+    assert main(argv) == 0
+    capsys.readouterr()
+    assert main(["train", "Drift-v0", "--out", str(out), "--resume", "--steps", "512", "--quiet"]) == 0
+    error = capsys.readouterr().err.splitlines()
+    assert len(error) == 2 and "the learning rate of updates 1-2" in error[0]
+    assert error[1] == (
+        "minippo: the checkpoint holds no state of the Drift-v0 environments (minippo cannot save them, or an older "
+        "minippo wrote it): they start fresh episodes, so the run goes on differently from one never interrupted"
+    )
+    assert [row["update"] for row in progress_without_clock(out)] == ["1", "2", "3", "4"]
