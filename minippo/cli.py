@@ -94,19 +94,19 @@ def cmd_train(args) -> int:
             raise MinippoError(f"--resume: cannot read {out / 'config.json'} ({error})")
         trained = done * config.batch_size
         if args.steps is not None and args.steps != config.total_steps:
-            longer = dataclasses.replace(config, total_steps=args.steps).validate()
-            if longer.num_updates < done:
+            extended = dataclasses.replace(config, total_steps=args.steps).validate()
+            if extended.num_updates < done:
                 raise MinippoError(
                     f"--resume --steps {args.steps:,}: the run has already trained {trained:,} steps ({done} updates)"
                 )
-            if config.anneal_lr and longer.num_updates != config.num_updates:
+            if config.anneal_lr and extended.num_updates != config.num_updates:
                 print(
                     f"minippo: the learning rate of updates 1-{done} was annealed over {config.num_updates} updates, "
-                    f"not {longer.num_updates}: the extended run differs from one trained to {args.steps:,} steps "
+                    f"not {extended.num_updates}: the extended run differs from one trained to {args.steps:,} steps "
                     "from the start (anneal_lr=false makes runs that extend exactly)",
                     file=sys.stderr,
                 )
-            config = longer
+            config = extended
         if done >= config.num_updates:
             print(
                 f"minippo: {out} has finished ({trained:,} steps, {done} updates); to train it further: minippo train "
