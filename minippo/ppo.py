@@ -401,40 +401,18 @@ def train(
     cannot be written (a full disk), raises MinippoError; either way the last checkpoint in ``out`` is left as it was.
     """
     trainer = Trainer(config)
-    rows: list[dict] = []
     try:
-        if out is not None:
-            out = Path(out)
-            out.mkdir(parents=True, exist_ok=True)
-            progress_path = out / "progress.csv"
-            with run_files(out, trainer):
-                if resume and (out / "checkpoint.npz").exists():
-                    with np.load(out / "checkpoint.npz", allow_pickle=False) as data:
-                        notice = trainer.load_state({key: data[key] for key in data.files})
-                    if notice:
-                        print(f"minippo: {notice}", file=sys.stderr)
-                    rows = progress_until(progress_path, trainer.update)
-                text = json.dumps(config.to_dict(), indent=2) + "\n"
-                write_atomically(out / "config.json", lambda handle: handle.write(text.encode()))
-                table = io.StringIO(newline="")
-                writer = csv.DictWriter(table, fieldnames=PROGRESS_FIELDS)
-                writer.writeheader()
-                writer.writerows(csv_row(row) for row in rows)
-                write_atomically(progress_path, lambda handle: handle.write(table.getvalue().encode()))
+        rows = [] if out is None else start_folder(Path(out), trainer, resume)
         while trainer.update < config.num_updates:
             row = trainer.run_update()
             rows.append(row)
-            stopping = stop is not None and stop.is_set()
-            last = trainer.update == config.num_updates
-            checkpoint = stopping or last or trainer.update % config.checkpoint_every == 0
+            stopping = stop is not None and stop.is_set()  # this update is the last, and it is checkpointed
             if out is not None:
-                with run_files(out, trainer):
-                    with open(progress_path, "a", newline="") as handle:
-                        csv.DictWriter(handle, fieldnames=PROGRESS_FIELDS).writerow(csv_row(row))
-                    if checkpoint:
-                        trainer.save_checkpoint(out)
-                        if on_checkpoint is not None:
-                            on_checkpoint(out)
+                last = trainer.update == config.num_updates
+                checkpoint = stopping or last or trainer.update % config.checkpoint_every == 0
+                write_update(Path(out), trainer, row, checkpoint)
+                if checkpoint and on_checkpoint is not None:
+                    on_checkpoint(out)
             if on_update is not None:
                 on_update(row)
             if stopping:
@@ -443,6 +421,37 @@ def train(
         for env in trainer.envs:
             env.close()
     return rows
+
+
+def start_folder(out: Path, trainer: Trainer, resume: bool) -> list[dict]:
+    """Write config.json and progress.csv's header; with ``resume``, first load the checkpoint, and keep the rows of
+    its updates. Returns those rows."""
+    out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    with run_files(out, trainer):
+        if resume and (out / "checkpoint.npz").exists():
+            with np.load(out / "checkpoint.npz", allow_pickle=False) as data:
+                notice = trainer.load_state({key: data[key] for key in data.files})
+            if notice:
+                print(f"minippo: {notice}", file=sys.stderr)
+            rows = progress_until(out / "progress.csv", trainer.update)
+        text = json.dumps(trainer.config.to_dict(), indent=2) + "\n"
+        write_atomically(out / "config.json", lambda handle: handle.write(text.encode()))
+        table = io.StringIO(newline="")
+        writer = csv.DictWriter(table, fieldnames=PROGRESS_FIELDS)
+        writer.writeheader()
+        writer.writerows(csv_row(row) for row in rows)
+        write_atomically(out / "progress.csv", lambda handle: handle.write(table.getvalue().encode()))
+    return rows
+
+
+def write_update(out: Path, trainer: Trainer, row: dict, checkpoint: bool) -> None:
+    """Append the update's row to progress.csv, then write the checkpoint when it is time for one."""
+    with run_files(out, trainer):
+        with open(out / "progress.csv", "a", newline="") as handle:
+            csv.DictWriter(handle, fieldnames=PROGRESS_FIELDS).writerow(csv_row(row))
+        if checkpoint:
+            trainer.save_checkpoint(out)
 
 
 @contextmanager
