@@ -86,6 +86,8 @@ def cmd_train(args) -> int:
     defaults = {f.name: getattr(Config(), f.name) for f in dataclasses.fields(Config)}
     if args.resume:
         done = checkpoint_update(out)
+        if done is None and (out / "checkpoint.npz").exists():
+            raise MinippoError(f"--resume: cannot read {out / 'checkpoint.npz'}")
         if done is None:
             raise MinippoError(f"--resume: no checkpoint in {out}")
         try:
