@@ -101,8 +101,8 @@ def env_state(env: gym.Env) -> dict | None:
         return state
     if type(env).__module__.startswith("gymnasium.envs.classic_control"):
         scalars = {}
-        for name in CLASSIC_STATE:
-            value = getattr(env, name, None)
+        for name in filter(lambda name: hasattr(env, name), CLASSIC_STATE):
+            value = getattr(env, name)
             if isinstance(value, np.ndarray | np.generic):
                 state[f"attr.{name}"] = np.array(value)
             else:
@@ -125,7 +125,7 @@ def load_env_state(env: gym.Env, state: dict) -> None:
         import mujoco
 
         for name in mujoco_arrays(env.data):
-            saved = state.get(f"data.{name}")
+            saved = state.get(f"data.{name}")  # those sized by the contacts of the moment are recomputed by a step
             if saved is not None and saved.shape == getattr(env.data, name).shape:
                 getattr(env.data, name)[...] = saved
         mujoco.mj_setState(env.model, env.data, state["physics"], mujoco.mjtState.mjSTATE_INTEGRATION)
