@@ -113,7 +113,7 @@ def minippo_version() -> str:
     return f"minippo {minippo.__version__}, numpy {numpy.__version__}"
 
 
-def minippo_run(config_dict: dict, name: str = "", board=None) -> dict:
+def minippo_run(config_dict: dict, name: str = "", board=None, resume: dict | None = None) -> dict:
     """``minippo train`` as the sweep engine runs it, then minippo's own deterministic evaluation of the final
     policy (``minippo eval RUN --episodes 10 --seed 0``)."""
     from threadpoolctl import threadpool_limits
@@ -121,7 +121,7 @@ def minippo_run(config_dict: dict, name: str = "", board=None) -> dict:
     from minippo.evaluate import evaluate
     from minippo.sweep import train_run
 
-    result = train_run(config_dict, name, board)
+    result = train_run(config_dict, name, board, resume)
     with threadpool_limits(1), tempfile.TemporaryDirectory(prefix="minippo-eval-") as scratch:
         policy = Path(scratch) / "policy.npz"
         policy.write_bytes(result["files"]["policy.npz"])
@@ -257,9 +257,12 @@ def sb3_evaluate(model, venv, env_id: str, episodes: int, seed: int) -> list[flo
     return returns
 
 
-def peer_run(config_dict: dict, name: str = "", board=None) -> dict:
-    """The sweep engine's task for both libraries: the run's name says which (``sb3-…`` or ``minippo-…``)."""
-    return (sb3_run if name.startswith("sb3-") else minippo_run)(config_dict, name, board)
+def peer_run(config_dict: dict, name: str = "", board=None, resume: dict | None = None) -> dict:
+    """The sweep engine's task for both libraries: the run's name says which (``sb3-…`` or ``minippo-…``). Only
+    minippo's runs keep checkpoints, so only they are ever handed ``resume``."""
+    if name.startswith("sb3-"):
+        return sb3_run(config_dict, name, board)
+    return minippo_run(config_dict, name, board, resume)
 
 
 # the sweep

@@ -4,11 +4,11 @@ trunk with two heads (eq. 9), all parameters in one flat vector. Saving and load
 from __future__ import annotations
 
 import json
-import os
 import zipfile
 
 import numpy as np
 
+from minippo.checkpoint import write_atomically
 from minippo.distributions import Categorical, DiagGaussian
 from minippo.errors import MinippoError
 from minippo.network import MLP
@@ -122,9 +122,12 @@ def save_policy(path, agent: ActorCritic, obs_normalizer, extra: dict | None = N
         "normalize_observations": obs_normalizer.enabled,
         "obs_clip": obs_normalizer.clip,
     }
-    tmp = f"{path}.tmp.npz"
-    np.savez(tmp, params=agent.params, meta=np.array(json.dumps(meta)), **obs_normalizer.stats.state("obs"))
-    os.replace(tmp, path)
+    write_atomically(
+        path,
+        lambda handle: np.savez(
+            handle, params=agent.params, meta=np.array(json.dumps(meta)), **obs_normalizer.stats.state("obs")
+        ),
+    )
 
 
 def load_policy(path):

@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
+import signal
 import sys
+import threading
 from pathlib import Path
 
 from minippo.errors import ConfigError, MinippoError, NonFiniteError
@@ -71,18 +74,41 @@ def config_help() -> str:
 
 
 def cmd_train(args) -> int:
-    from minippo.ppo import train
+    from minippo.ppo import checkpoint_update, train
 
     out = Path(args.out)
     if args.resume:
-        if not (out / "checkpoint.npz").exists():
+        done = checkpoint_update(out)
+        if done is None and (out / "checkpoint.npz").exists():
+            raise MinippoError(f"--resume: cannot read {out / 'checkpoint.npz'}")
+        if done is None:
             raise MinippoError(f"--resume: no checkpoint in {out}")
         try:
             config = Config.from_dict(json.loads((out / "config.json").read_text()))
         except (FileNotFoundError, json.JSONDecodeError) as error:
             raise MinippoError(f"--resume: cannot read {out / 'config.json'} ({error})")
-        if args.steps is not None:
-            config.total_steps = args.steps
+        trained = done * config.batch_size
+        if args.steps is not None and args.steps != config.total_steps:
+            extended = dataclasses.replace(config, total_steps=args.steps).validate()
+            if extended.num_updates < done:
+                raise MinippoError(
+                    f"--resume --steps {args.steps:,}: the run has already trained {trained:,} steps ({done} updates)"
+                )
+            if config.anneal_lr and extended.num_updates != config.num_updates:
+                print(
+                    f"minippo: the learning rate of updates 1-{done} was annealed over {config.num_updates} updates, "
+                    f"not {extended.num_updates}: the extended run differs from one trained to {args.steps:,} steps "
+                    "from the start (anneal_lr=false makes runs that extend exactly)",
+                    file=sys.stderr,
+                )
+            config = extended
+        if done >= config.num_updates:
+            print(
+                f"minippo: {out} has finished ({trained:,} steps, {done} updates); to train it further: minippo train "
+                f"{config.env_id} --out {out} --resume --steps N, N > {trained:,}",
+                file=sys.stderr,
+            )
+            return 0
     else:
         if out.exists() and any(out.iterdir()):
             if not args.force:
@@ -119,24 +145,39 @@ def cmd_train(args) -> int:
             bar.n = row["step"]
             bar.set_postfix_str(f"return {row['return_mean']:.1f}, {row['steps_per_s']:.0f} steps/s", refresh=True)
 
+    # Ctrl-C: the update under way is finished and checkpointed, then the run stops; a second Ctrl-C stops at once
+    stop = threading.Event()
+
+    def interrupt(signum, frame):
+        if stop.is_set():
+            raise KeyboardInterrupt
+        stop.set()
+
+    in_main_thread = threading.current_thread() is threading.main_thread()  # where Python lets a handler be set
+    previous = signal.signal(signal.SIGINT, interrupt) if in_main_thread else None
+    continue_with = f"continue with: minippo train {config.env_id} --out {out} --resume"
     try:
-        rows = train(config, out, resume=args.resume, on_update=on_update)
+        rows = train(config, out, resume=args.resume, on_update=on_update, stop=stop)
     except NonFiniteError as error:
         kept = "the last good checkpoint is kept there" if (out / "checkpoint.npz").exists() else "no checkpoint yet"
         raise MinippoError(f"stopped: {error}; {kept} ({out})") from None
     except KeyboardInterrupt:
+        kept = checkpoint_update(out)
+        kept = "no checkpoint yet" if kept is None else f"the checkpoint of update {kept} is kept; {continue_with}"
+        print(f"minippo: interrupted at once; {kept}", file=sys.stderr)
+        return 130
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
         if bar is not None:
             bar.close()
-        print(
-            f"minippo: interrupted; continue with: minippo train {config.env_id} --out {out} --resume", file=sys.stderr
-        )
+    last = rows[-1]
+    if stop.is_set() and last["update"] < config.num_updates:
+        print(f"minippo: interrupted; checkpoint written at update {last['update']}; {continue_with}", file=sys.stderr)
         return 130
-    if bar is not None:
-        bar.close()
     from minippo.plotting import plot_runs
 
     plot_runs([out], out / "curve.png", title=f"{config.env_id}, seed {config.seed}")
-    last = rows[-1]
     print(
         f"{config.env_id}: {last['step']} steps, return (last 100 episodes) {last['return_mean']:.1f}, "
         f"{last['steps_per_s']:.0f} steps/s, {last['wall_s']:.0f} s -> {out}"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import difflib
+import json
 import os
 
 import gymnasium as gym
@@ -68,3 +69,80 @@ def action_bounds(env: gym.Env):
     if isinstance(space, gym.spaces.Box):
         return space.low.astype(np.float64), space.high.astype(np.float64)
     return None, None
+
+
+# an environment in the middle of its episode, saved so that a resumed run steps on exactly as it would have
+
+CLASSIC_STATE = ("state", "steps_beyond_terminated", "last_u")  # what the classic-control tasks carry between steps
+
+
+def env_state(env: gym.Env) -> dict | None:
+    """Everything the next steps of ``env`` depend on, as named arrays: the simulator (MuJoCo's integration state and
+    the quantities it computed from it, which the tasks read before their next step), or a classic-control task's
+    own state; the time limit's step count; the environment's random generator. None for an environment minippo does
+    not know how to save (another family of tasks, or a wrapper it does not know)."""
+    state = {}
+    while isinstance(env, gym.Wrapper):
+        if isinstance(env, gym.wrappers.TimeLimit):
+            state["elapsed_steps"] = np.array(env._elapsed_steps)
+        elif not isinstance(env, (gym.wrappers.OrderEnforcing, gym.wrappers.PassiveEnvChecker)):
+            return None
+        env = env.env
+    state["np_random"] = np.array(json.dumps(env.np_random.bit_generator.state))
+    if is_mujoco(env):
+        import mujoco
+
+        model, data = env.model, env.data
+        physics = np.empty(mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_INTEGRATION))
+        mujoco.mj_getState(model, data, physics, mujoco.mjtState.mjSTATE_INTEGRATION)
+        state["physics"] = physics
+        for name in mujoco_arrays(data):
+            state[f"data.{name}"] = getattr(data, name).copy()
+        return state
+    if type(env).__module__.startswith("gymnasium.envs.classic_control"):
+        scalars = {}
+        for name in filter(lambda name: hasattr(env, name), CLASSIC_STATE):
+            value = getattr(env, name)
+            if isinstance(value, np.ndarray | np.generic):
+                state[f"attr.{name}"] = np.array(value)
+            else:
+                scalars[name] = value
+        state["scalars"] = np.array(json.dumps(scalars))
+        return state
+    return None
+
+
+def load_env_state(env: gym.Env, state: dict) -> None:
+    """Put ``env`` back where ``env_state`` saw it (``env`` made by ``make_env`` with the same id, and reset once)."""
+    outer = env
+    while isinstance(outer, gym.Wrapper):
+        if isinstance(outer, gym.wrappers.TimeLimit):
+            outer._elapsed_steps = int(state["elapsed_steps"])
+        outer = outer.env
+    env = env.unwrapped
+    env.np_random.bit_generator.state = json.loads(str(state["np_random"]))
+    if is_mujoco(env):
+        import mujoco
+
+        for name in mujoco_arrays(env.data):
+            saved = state.get(f"data.{name}")  # those sized by the contacts of the moment are recomputed by a step
+            if saved is not None and saved.shape == getattr(env.data, name).shape:
+                getattr(env.data, name)[...] = saved
+        mujoco.mj_setState(env.model, env.data, state["physics"], mujoco.mjtState.mjSTATE_INTEGRATION)
+        return
+    for name, value in json.loads(str(state["scalars"])).items():
+        setattr(env, name, value)
+    for name in CLASSIC_STATE:
+        if f"attr.{name}" in state:
+            value = np.array(state[f"attr.{name}"])
+            setattr(env, name, value if value.ndim else value[()])
+
+
+def is_mujoco(env) -> bool:
+    return type(env).__module__.startswith("gymnasium.envs.mujoco") and hasattr(env, "data")
+
+
+def mujoco_arrays(data) -> list[str]:
+    """The arrays of an ``mjData``: its state and everything computed from it at the last step (positions of bodies
+    and sites, contact forces, sensors), some of which a task reads before it steps again."""
+    return [name for name in dir(data) if not name.startswith("_") and isinstance(getattr(data, name), np.ndarray)]

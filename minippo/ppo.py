@@ -20,8 +20,11 @@ import io
 import json
 import math
 import os
+import sys
 import time
 import tokenize
+import zipfile
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,6 +34,7 @@ from threadpoolctl import threadpool_limits
 from minippo import advantages as adv
 from minippo import losses
 from minippo.agent import ActorCritic, save_policy
+from minippo.checkpoint import write_atomically
 from minippo.envs import make_env, spaces_of
 from minippo.errors import ConfigError, MinippoError, NonFiniteError
 from minippo.normalization import ObservationNormalizer, RewardScaler
@@ -55,6 +59,7 @@ PROGRESS_FIELDS = [
     "steps_per_s",
     "wall_s",
 ]
+COUNTS = ("update", "step", "episodes")  # the integer columns of progress.csv
 
 
 @dataclass
@@ -397,86 +402,158 @@ class Trainer:
             "wall_s": self.wall_s,
         }
 
-    # checkpoints: everything needed to carry on
+    # checkpoints: everything the next update depends on, so that a resumed run is the uninterrupted run
 
     def state(self) -> dict:
-        state = {
+        return {
             "params": self.agent.params.copy(),
             "update": np.array(self.update),
-            "steps": np.array(self.rollout.steps),
             "wall_s": np.array(self.wall_s),
             "kl_beta": np.array(self.kl_beta),
-            "returns": np.array(self.rollout.completed_returns),
-            "lengths": np.array(self.rollout.completed_lengths),
             "rng": np.array(json.dumps(self.rng.bit_generator.state)),
             "reward_discounted": self.reward_scaler.discounted,
+            **self.rollout.state(),
             **{f"adam_{k}": v for k, v in self.optimizer.state_dict().items()},
             **self.obs_normalizer.stats.state("obs"),
             **self.reward_scaler.stats.state("ret"),
         }
-        return state
 
-    def load_state(self, state: dict) -> None:
+    def load_state(self, state: dict) -> str | None:
+        """Carry on from ``state``; returns a one-line notice when the run cannot go on exactly as it would have."""
         self.agent.params[...] = state["params"]
         self.update = int(state["update"])
-        self.rollout.steps = int(state["steps"])
         self.wall_s = float(state["wall_s"])
         self.kl_beta = float(state["kl_beta"])
-        self.rollout.completed_returns = [float(x) for x in state["returns"]]
-        self.rollout.completed_lengths = [int(x) for x in state["lengths"]]
         self.rng.bit_generator.state = json.loads(str(state["rng"]))
         self.reward_scaler.discounted = np.array(state["reward_discounted"], dtype=np.float64)
         self.optimizer.load_state_dict({k[5:]: v for k, v in state.items() if k.startswith("adam_")})
         self.obs_normalizer.stats.load(state, "obs")
         self.obs_normalizer.refresh()
         self.reward_scaler.stats.load(state, "ret")
-        # the environments restart from fresh episodes, seeded from the update count
-        for i, env in enumerate(self.envs):
-            self.rollout.raw_obs[i] = env.reset(seed=self.config.seed + 10_000 * self.update + i)[0]
+        if self.rollout.load_state(state, self.config.seed + 10_000 * self.update):
+            return None
+        return (
+            f"the checkpoint holds no state of the {self.config.env_id} environments (minippo cannot save them, or "
+            "an older minippo wrote it): they start fresh episodes, so the run goes on differently from one never "
+            "interrupted"
+        )
 
     def save_checkpoint(self, out: Path) -> None:
-        tmp = out / "checkpoint.tmp.npz"
-        np.savez(tmp, **self.state())
-        os.replace(tmp, out / "checkpoint.npz")
+        """Write checkpoint.npz, then policy.npz, each whole or not at all."""
+        state = self.state()
+        write_atomically(out / "checkpoint.npz", lambda handle: np.savez(handle, **state))
         save_policy(
             out / "policy.npz", self.agent, self.obs_normalizer, {"env_id": self.config.env_id, "update": self.update}
         )
 
 
-def train(config: Config, out: str | os.PathLike | None = None, resume: bool = False, on_update=None) -> list[dict]:
+def train(
+    config: Config,
+    out: str | os.PathLike | None = None,
+    resume: bool = False,
+    on_update=None,
+    stop=None,
+    on_checkpoint=None,
+) -> list[dict]:
     """Train PPO with ``config``; with ``out``, write config.json, progress.csv, checkpoint.npz and policy.npz there.
 
-    ``on_update(row)`` is called after every update (the command line draws its progress bar with it). Returns the
-    progress rows. On NaN/inf, raises NonFiniteError; the last checkpoint in ``out`` is left as it was.
+    ``resume``: carry on from the checkpoint in ``out``, exactly as the run would have gone on. ``on_update(row)`` is
+    called after every update (the command line draws its progress bar with it), ``on_checkpoint(out)`` after every
+    checkpoint. ``stop``: an object whose ``is_set()`` turns true to end the run early (Ctrl-C); the update under way
+    is finished and checkpointed first. Returns the progress rows. On NaN/inf, raises NonFiniteError; when a file
+    cannot be written (a full disk), raises MinippoError; either way the last checkpoint in ``out`` is left as it was.
     """
     trainer = Trainer(config)
-    rows: list[dict] = []
-    if out is not None:
-        out = Path(out)
-        out.mkdir(parents=True, exist_ok=True)
-        progress_path = out / "progress.csv"
+    try:
+        rows = [] if out is None else start_folder(Path(out), trainer, resume)
+        while trainer.update < config.num_updates:
+            row = trainer.run_update()
+            rows.append(row)
+            stopping = stop is not None and stop.is_set()  # this update is the last, and it is checkpointed
+            if out is not None:
+                last = trainer.update == config.num_updates
+                checkpoint = stopping or last or trainer.update % config.checkpoint_every == 0
+                write_update(Path(out), trainer, row, checkpoint)
+                if checkpoint and on_checkpoint is not None:
+                    on_checkpoint(out)
+            if on_update is not None:
+                on_update(row)
+            if stopping:
+                break
+    finally:
+        for env in trainer.envs:
+            env.close()
+    return rows
+
+
+def start_folder(out: Path, trainer: Trainer, resume: bool) -> list[dict]:
+    """Write config.json and progress.csv's header; with ``resume``, first load the checkpoint, and keep the rows of
+    its updates. Returns those rows."""
+    out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    with run_files(out, trainer):
         if resume and (out / "checkpoint.npz").exists():
             with np.load(out / "checkpoint.npz", allow_pickle=False) as data:
-                trainer.load_state({key: data[key] for key in data.files})
-            with open(progress_path, newline="") as handle:
-                rows = [r for r in csv.DictReader(handle) if int(r["update"]) <= trainer.update]
-        (out / "config.json").write_text(json.dumps(config.to_dict(), indent=2) + "\n")
-        with open(progress_path, "w", newline="") as handle:
-            writer = csv.DictWriter(handle, fieldnames=PROGRESS_FIELDS)
-            writer.writeheader()
-            writer.writerows(rows)
-    while trainer.update < config.num_updates:
-        row = trainer.run_update()
-        rows.append(row)
-        if out is not None:
-            with open(progress_path, "a", newline="") as handle:
-                csv.DictWriter(handle, fieldnames=PROGRESS_FIELDS).writerow(
-                    {k: (repr(v) if isinstance(v, float) else v) for k, v in row.items()}
-                )
-            if trainer.update % config.checkpoint_every == 0 or trainer.update == config.num_updates:
-                trainer.save_checkpoint(out)
-        if on_update is not None:
-            on_update(row)
-    for env in trainer.envs:
-        env.close()
+                notice = trainer.load_state({key: data[key] for key in data.files})
+            if notice:
+                print(f"minippo: {notice}", file=sys.stderr)
+            rows = progress_until(out / "progress.csv", trainer.update)
+        text = json.dumps(trainer.config.to_dict(), indent=2) + "\n"
+        write_atomically(out / "config.json", lambda handle: handle.write(text.encode()))
+        table = io.StringIO(newline="")
+        writer = csv.DictWriter(table, fieldnames=PROGRESS_FIELDS)
+        writer.writeheader()
+        writer.writerows(csv_row(row) for row in rows)
+        write_atomically(out / "progress.csv", lambda handle: handle.write(table.getvalue().encode()))
+    return rows
+
+
+def write_update(out: Path, trainer: Trainer, row: dict, checkpoint: bool) -> None:
+    """Append the update's row to progress.csv, then write the checkpoint when it is time for one."""
+    with run_files(out, trainer):
+        with open(out / "progress.csv", "a", newline="") as handle:
+            csv.DictWriter(handle, fieldnames=PROGRESS_FIELDS).writerow(csv_row(row))
+        if checkpoint:
+            trainer.save_checkpoint(out)
+
+
+@contextmanager
+def run_files(out: Path, trainer: Trainer):
+    """A run folder's file that cannot be written (a full disk, no permission) stops the run with one line."""
+    try:
+        yield
+    except OSError as error:
+        kept = checkpoint_update(out)
+        kept = "no checkpoint yet" if kept is None else f"the checkpoint of update {kept} is kept"
+        reason = error.strerror or str(error)
+        raise MinippoError(f"cannot write the run's files in {out} ({reason}) at update {trainer.update}; {kept}")
+
+
+def checkpoint_update(out) -> int | None:
+    """The update of the checkpoint in the run folder ``out``, or None when it has none (or none that can be read)."""
+    try:
+        with np.load(Path(out) / "checkpoint.npz", allow_pickle=False) as data:
+            return int(data["update"])
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile):
+        return None
+
+
+def csv_row(row: dict) -> dict:
+    """A progress row as progress.csv holds it: floats by repr, which reads back to the same float."""
+    return {key: (repr(value) if isinstance(value, float) else value) for key, value in row.items()}
+
+
+def progress_until(path: Path, update: int) -> list[dict]:
+    """progress.csv's rows of updates 1 … ``update`` (the checkpoint's), read back to the numbers they were written
+    from: the rows a killed run wrote after its last checkpoint, and a row cut short by the kill, are dropped."""
+    try:
+        with open(path, newline="") as handle:
+            rows = list(csv.DictReader(handle))[:update]
+        rows = [{key: (int if key in COUNTS else float)(row[key]) for key in PROGRESS_FIELDS} for row in rows]
+    except FileNotFoundError:
+        rows = []
+    except (KeyError, TypeError, ValueError):
+        rows = None
+    if rows is None or [row["update"] for row in rows] != list(range(1, update + 1)):
+        raise MinippoError(f"{path} does not hold the rows of updates 1 to {update}, the checkpoint's; cannot resume")
     return rows

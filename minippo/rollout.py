@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from minippo.distributions import sample_categorical
+from minippo.envs import env_state, load_env_state
 from minippo.errors import NonFiniteError
 
 
@@ -108,6 +109,44 @@ class Rollout:
         scaled = self.reward_scaler.scale(rewards, terminated | truncated)
         old_log_std = agent.log_std.copy()  # with the means, all of π_θold: eq. 8's KL compares against both
         return Batch(obs, actions, logp, policy_out, old_log_std, values, next_values, scaled, terminated, truncated)
+
+    # checkpoints: the episodes in progress, so that a resumed run steps on from exactly where it stopped
+
+    def state(self) -> dict:
+        """The counts, the finished episodes, and each environment in the middle of its episode: the observation it
+        last returned, the return and length so far, and its own state (``envs.env_state``), left out when one of
+        the environments cannot be saved."""
+        state = {
+            "steps": np.array(self.steps),
+            "returns": np.array(self.completed_returns, dtype=np.float64),
+            "lengths": np.array(self.completed_lengths, dtype=np.int64),
+            "raw_obs": self.raw_obs.copy(),
+            "episode_return": np.array(self.episode_return, dtype=np.float64),
+            "episode_length": np.array(self.episode_length, dtype=np.int64),
+        }
+        saved = [env_state(env) for env in self.envs]
+        if all(env is not None for env in saved):
+            for i, env in enumerate(saved):
+                state.update({f"env{i}.{key}": value for key, value in env.items()})
+        return state
+
+    def load_state(self, state: dict, seed: int) -> bool:
+        """Carry on from ``state``. Returns False when it holds no environments (they cannot be saved, or an older
+        minippo wrote it): they then start fresh episodes, reset with ``seed + i``."""
+        self.steps = int(state["steps"])
+        self.completed_returns = [float(x) for x in state["returns"]]
+        self.completed_lengths = [int(x) for x in state["lengths"]]
+        if not all(f"env{i}.np_random" in state for i in range(len(self.envs))) or "raw_obs" not in state:
+            for i, env in enumerate(self.envs):
+                self.raw_obs[i] = env.reset(seed=seed + i)[0]
+            return False
+        for i, env in enumerate(self.envs):
+            prefix = f"env{i}."
+            load_env_state(env, {key[len(prefix) :]: value for key, value in state.items() if key.startswith(prefix)})
+        self.raw_obs = np.array(state["raw_obs"], dtype=np.float64)
+        self.episode_return = [float(x) for x in state["episode_return"]]
+        self.episode_length = [int(x) for x in state["episode_length"]]
+        return True
 
     def _check(self, observation: np.ndarray, t: int) -> np.ndarray:
         if not np.isfinite(observation).all():

@@ -22,8 +22,9 @@ stopped after it, with one worker per core (``--workers N`` for fewer), listenin
 
 Safe to stop and start again: a run with an ``ok`` row in the CSV is skipped, so the same command resumes a sweep (a
 row of the same run made by another command, with other steps or settings, is refused: another sweep's CSV).
-A run that fails (an exception, or NaN/inf in the loss: ``NonFiniteError``) is tried again up to ``--retries`` more
-times, then recorded with status ``failed`` and its reason, and the sweep goes on; a later invocation tries it again.
+A run that fails (an exception, NaN/inf in the loss: ``NonFiniteError``, or a worker that dies) is tried again up to
+``--retries`` more times, from its last checkpoint (whose files the driver holds), then recorded with status
+``failed`` and its reason, and the sweep goes on; a later invocation tries it again.
 Ctrl-C records the runs already finished, stops the workers, and exits with 130.
 
 Ray is an optional dependency (``pip install -e ".[sweep]"``); nothing else in minippo imports it. ``plan`` makes the
@@ -64,6 +65,7 @@ RESULT_FIELDS = [
     "command",
 ]
 LOOPBACK = ("127.0.0.1", "localhost", "::1")
+RESUMABLE = ("config.json", "progress.csv", "checkpoint.npz", "policy.npz")  # what a run carries on from
 
 
 @dataclass
@@ -167,12 +169,14 @@ def text(value, between: str = ",") -> str:
 # one training, as a Ray task runs it
 
 
-def train_run(config_dict: dict, name: str = "", board=None) -> dict:
+def train_run(config_dict: dict, name: str = "", board=None, resume: dict | None = None) -> dict:
     """Train one run in a scratch folder with one math thread and return what it wrote: {"files": {name: bytes},
-    "last": the last progress row, "node", "host", "pid"}. ``board`` (a Ray actor) hears each update's return."""
+    "last": the last progress row, "resumed_from": the update it started from, "node", "host", "pid"}. ``board`` (a
+    Ray actor) hears each update's return and keeps each checkpoint's files; ``resume``: such files, from which the
+    run carries on as it would have (a retry after its worker died)."""
     from threadpoolctl import threadpool_limits
 
-    from minippo.ppo import train
+    from minippo.ppo import checkpoint_update, train
 
     config = Config.from_dict(config_dict)
     total = config.num_updates * config.batch_size
@@ -181,8 +185,16 @@ def train_run(config_dict: dict, name: str = "", board=None) -> dict:
         if board is not None:
             board.report.remote(name, row["step"], total, row["return_mean"])
 
+    def on_checkpoint(out):
+        if board is not None:
+            files = {path.name: path.read_bytes() for path in sorted(Path(out).iterdir()) if path.name in RESUMABLE}
+            board.keep.remote(name, checkpoint_update(out), files)
+
     with threadpool_limits(1), tempfile.TemporaryDirectory(prefix="minippo-run-") as scratch:
-        rows = train(config, scratch, on_update=on_update)
+        for file_name, data in (resume or {}).items():
+            (Path(scratch) / file_name).write_bytes(data)
+        resumed_from = checkpoint_update(scratch) or 0
+        rows = train(config, scratch, resume=bool(resume), on_update=on_update, on_checkpoint=on_checkpoint)
         files = {path.name: path.read_bytes() for path in sorted(Path(scratch).iterdir()) if path.is_file()}
     node = ""
     if "ray" in sys.modules:
@@ -190,7 +202,14 @@ def train_run(config_dict: dict, name: str = "", board=None) -> dict:
 
         if ray.is_initialized():
             node = ray.get_runtime_context().get_node_id()[:12]
-    return {"files": files, "last": rows[-1], "node": node, "host": socket.gethostname(), "pid": os.getpid()}
+    return {
+        "files": files,
+        "last": rows[-1],
+        "resumed_from": resumed_from,
+        "node": node,
+        "host": socket.gethostname(),
+        "pid": os.getpid(),
+    }
 
 
 # the driver: CSV, run folders, progress
@@ -381,7 +400,9 @@ def execute(runs: list[Run], on_result, workers=None, address=None, retries=0, p
         while queue or pending:
             while queue and len(pending) < window:
                 run, attempt = queue.pop(0)
-                pending[remote.remote(run.config.to_dict(), run.name, board)] = (run, attempt)
+                kept = ray.get(board.kept.remote(run.name)) if attempt > 1 else None
+                resume = {"resume": kept} if kept else {}
+                pending[remote.remote(run.config.to_dict(), run.name, board, **resume)] = (run, attempt)
             ready, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)
             for ref in ready:
                 run, attempt = pending.pop(ref)
@@ -389,9 +410,10 @@ def execute(runs: list[Run], on_result, workers=None, address=None, retries=0, p
                     result, error = ray.get(ref), ""
                 except ray.exceptions.RayError as failure:
                     result, error = None, one_line(failure)
-                    if attempt <= retries:
+                    if attempt <= retries:  # again, from the run's last checkpoint (the board holds its files)
                         queue.insert(0, (run, attempt + 1))
                         continue
+                board.forget.remote(run.name)
                 with interrupt_after():
                     on_result(run, result, error, attempt)
                 last = f"{run.name} failed" if result is None else f"{run.name} {result['last']['return_mean']:.1f}"
@@ -421,13 +443,26 @@ def execute(runs: list[Run], on_result, workers=None, address=None, retries=0, p
 
 
 class Board:
-    """A Ray actor that holds each running run's latest step and return, for the progress bar."""
+    """A Ray actor that holds each running run's latest step and return, for the progress bar, and the files of its
+    latest checkpoint, from which a run whose worker died is tried again (no file is shared between machines)."""
 
     def __init__(self):
         self.latest = {}
+        self.checkpoints = {}  # run name -> (update, {file name: bytes})
 
     def report(self, name, step, total, return_mean):
         self.latest[name] = (step, total, return_mean)
+
+    def keep(self, name, update, files):
+        if update is not None and update > self.checkpoints.get(name, (0, None))[0]:
+            self.checkpoints[name] = (update, files)
+
+    def kept(self, name):
+        return self.checkpoints.get(name, (0, None))[1]
+
+    def forget(self, name):
+        self.checkpoints.pop(name, None)
+        self.latest.pop(name, None)
 
     def snapshot(self):
         return dict(self.latest)
