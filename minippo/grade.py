@@ -18,9 +18,12 @@ book name (``minippo grade the-min``) comes from book/NN-<name>.md. A new chapte
 from __future__ import annotations
 
 import csv
+import hashlib
+import hmac
 import json
 import os
 import re
+import secrets
 import signal
 import subprocess
 import sys
@@ -35,6 +38,8 @@ BOOK = ROOT / "book"
 IMPL_VARIABLE = "MINIPPO_IMPL"
 LOG_VARIABLE = "MINIPPO_GRADE_LOG"
 STOP_VARIABLE = "MINIPPO_GRADE_STOP_AT_FIRST_FAILURE"
+KEY_VARIABLE = "MINIPPO_GRADE_KEY"  # signs every record of the log, so that a record the tests did not write is ignored
+HIDE_VARIABLE = "MINIPPO_GRADE_HIDE"
 RUN_LIMIT_S = 1800  # the whole run; each test has its own, much shorter limit
 RESTARTS = 5  # how many times a run whose test process died goes on with the tests that had not run
 # the book's chapter names, so "minippo grade the-min" works as well as "minippo grade 6"; book_names() adds any
@@ -114,11 +119,25 @@ _variant_of_test: dict[str, str] = {}
 _rejected_variants: set[str] = set()
 
 
+_KEY = os.environ.pop(KEY_VARIABLE, "")  # read once, when pytest loads this plugin, and kept out of the environment
+
+
+def _signature(text: str, key: str) -> str:
+    return hmac.new(key.encode(), text.encode(), hashlib.sha256).hexdigest()
+
+
 def _log(record: dict) -> None:
     path = os.environ.get(LOG_VARIABLE)
     if path:
+        text = json.dumps(record)
         with open(path, "a", encoding="utf-8") as handle:
-            handle.write(json.dumps(record) + "\n")
+            handle.write(json.dumps({"record": text, "mac": _signature(text, _KEY)}) + "\n")
+
+
+def log_integrity(chapter: str, note: str | None, isolation: str | None = None) -> None:
+    """Record what a submission was seen doing that the instructor should know of (``note``), or how its worker was
+    isolated; both go to the CSV's integrity and isolation columns."""
+    _log({"integrity": chapter, "note": note, "isolation": isolation})
 
 
 def pytest_collection_finish(session) -> None:
@@ -182,8 +201,18 @@ def plain_message(report) -> str:
 # running the tests and printing the scoreboard
 
 
-def run_tests(impl: str, files, stop_at_first_failure: bool = False, limit_s: float = RUN_LIMIT_S, extra_args=()):
+def run_tests(
+    impl: str,
+    files,
+    stop_at_first_failure: bool = False,
+    limit_s: float = RUN_LIMIT_S,
+    extra_args=(),
+    integrity: dict | None = None,
+    hide=(),
+):
     """Run pytest on ``files`` against ``impl`` in a child process; return (collected node ids, results, note).
+    ``integrity``, if given, is filled with {chapter number: [notes]} and {"isolation": how the worker was kept apart}.
+    ``hide``: folders the student's worker must not see besides the repository (the class folder).
 
     If the child process dies (student code that calls os._exit, crashes the interpreter or is killed), the test it
     was running fails with that reason and the tests that had not run yet run in a new child, so one crash costs one
@@ -194,6 +223,11 @@ def run_tests(impl: str, files, stop_at_first_failure: bool = False, limit_s: fl
         env[STOP_VARIABLE] = "1"
     for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         env.setdefault(name, "1")  # small matrices: extra BLAS threads only spin
+    key = secrets.token_hex(32)
+    env[KEY_VARIABLE] = key
+    if hide:
+        env[HIDE_VARIABLE] = os.pathsep.join(str(p) for p in hide)
+    integrity = integrity if integrity is not None else {}
     collected, results, note = [], {}, ""
     targets = [str(f) for f in files]
     deadline = time.monotonic() + limit_s
@@ -215,7 +249,7 @@ def run_tests(impl: str, files, stop_at_first_failure: bool = False, limit_s: fl
                     note = f"pytest stopped with exit code {returncode}: {' / '.join(tail)}"
             except subprocess.TimeoutExpired:
                 note = f"the run was stopped after {limit_s:g} s"
-            running = _read_log(log, results)
+            running = _read_log(log, results, key, integrity)
             if attempt == 0:
                 collected = running.pop("collected", [])
             missing = [nodeid for nodeid in collected if nodeid not in results]
@@ -237,13 +271,33 @@ def run_tests(impl: str, files, stop_at_first_failure: bool = False, limit_s: fl
     return collected, ordered, note
 
 
-def _read_log(log: Path, results: dict) -> dict:
-    """Read one child's log into ``results``; return {"collected": [...], "started": the last test begun}."""
+def _read_log(log: Path, results: dict, key: str, integrity: dict) -> dict:
+    """Read one child's log into ``results`` and ``integrity``; return {"collected": [...], "started": the last test
+    begun}. A line that is not a record signed with ``key`` (which only the grader and its tests know) is ignored and
+    counted in the integrity notes."""
     found = {}
     if not log.exists():
         return found
-    for line in log.read_text(encoding="utf-8").splitlines():
-        record = json.loads(line)
+    forged = 0
+    for line in log.read_text(encoding="utf-8", errors="replace").splitlines():
+        try:
+            signed = json.loads(line)
+            text = signed["record"]
+            if not hmac.compare_digest(str(signed["mac"]), _signature(text, key)):
+                raise ValueError
+            record = json.loads(text)
+        except (ValueError, KeyError, TypeError):
+            forged += 1
+            continue
+        if "integrity" in record:
+            number = chapter_of_nodeid(f"test_{record['integrity']}.py")
+            if record.get("note"):
+                notes = integrity.setdefault(number, [])
+                if record["note"] not in notes:
+                    notes.append(record["note"])
+            if record.get("isolation"):
+                integrity["isolation"] = record["isolation"]
+            continue
         if "collected" in record:
             found["collected"] = record["collected"]
             continue
@@ -253,6 +307,8 @@ def _read_log(log: Path, results: dict) -> dict:
         old = results.get(record["nodeid"])
         if old is None or old.outcome == "passed":  # a failing teardown spoils a passed call
             results[record["nodeid"]] = Result(record["nodeid"], record["outcome"], record["message"])
+    if forged:
+        integrity.setdefault("log", []).append(f"{forged} line(s) of the grader's log were not written by the tests")
     return found
 
 

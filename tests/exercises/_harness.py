@@ -9,6 +9,11 @@ The implementation is chosen by the environment variable MINIPPO_IMPL:
   the tests accept any correct implementation, not only the reference's way;
 - a folder path: a folder holding chNN_*.py modules with the same functions (a copy of exercises/ elsewhere).
 
+A student's code (``exercises`` or a folder) never runs in this process: ``load_student`` starts a worker process
+for it (minippo.sandbox), and RemoteStudent sends each call there and brings back only the result, so the tests, their
+verdict and the grader's log stay out of its reach. The reference and the variants, the course's own code, run here
+unless MINIPPO_GRADE_ISOLATION=worker (``none`` runs everything here, as for debugging the tests).
+
 Test modules import the ``student`` fixture and ``pytest_generate_tests`` from here. (A conftest.py in this folder
 would take the module name ``conftest`` from tests/conftest.py, which other tests import helpers from.)
 """
@@ -31,6 +36,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 IMPL_VARIABLE = "MINIPPO_IMPL"
+ISOLATION_VARIABLE = "MINIPPO_GRADE_ISOLATION"
+HIDE_VARIABLE = "MINIPPO_GRADE_HIDE"  # more folders the worker must not see (the class folder), os.pathsep-separated
 if str(ROOT) not in sys.path:  # exercises/ and solutions/ are packages at the repository root
     sys.path.insert(0, str(ROOT))
 
@@ -203,6 +210,13 @@ def _load(chapter: str, impl: str, variant: str | None):
         where = str(path)
     if not path.exists():
         return Broken(where, "there is no such file")
+    if isolated(impl):
+        try:
+            return _load_isolated(chapter, path.parent, where)
+        except KeyboardInterrupt:
+            raise
+        except BaseException as error:  # noqa: BLE001 - a time-out while the worker imports the module
+            return Broken(where, _describe(error))
     try:
         if impl in ("solutions", "exercises"):
             module = importlib.import_module(f"{impl}.{chapter}")
@@ -213,6 +227,97 @@ def _load(chapter: str, impl: str, variant: str | None):
     except BaseException as error:  # noqa: BLE001 - a syntax error, sys.exit or a time-out while importing
         return Broken(where, _describe(error))
     return Student(module, where)
+
+
+class RemoteStudent:
+    """The module under test, loaded in a worker process: each call sends its arguments there and brings back the
+    result (and the arguments' in-place changes). Errors read as Student's do: the call with its input shapes, the
+    line of the student's code, a hint."""
+
+    def __init__(self, sandbox, where: str):
+        self._sandbox, self._where = sandbox, where
+        self._reported = 0
+
+    def _report(self) -> None:
+        """Pass the worker's integrity notes to the grader's log, each once."""
+        from minippo.grade import log_integrity
+
+        for note in self._sandbox.notes[self._reported :]:
+            log_integrity(self._sandbox.chapter, note)
+        self._reported = len(self._sandbox.notes)
+
+    def _ready(self):
+        if not self._sandbox.alive():  # a time limit or a crash ended the last worker: start a new one
+            error = self._sandbox.start()
+            self._report()
+            if error:
+                pytest.fail(f"{self._where} could not be imported: {error}", pytrace=False)
+        return self._sandbox
+
+    def __getattr__(self, name):
+        if name.startswith("__"):
+            raise AttributeError(name)
+        from minippo.sandbox import StudentRaised, WorkerDied
+
+        sandbox = self._ready()
+        if name not in sandbox.functions:
+            try:
+                return sandbox.get(name)
+            except AttributeError:
+                pytest.fail(f"{self._where} has no function {name}: keep the names of the exercise", pytrace=False)
+            except WorkerDied as error:
+                raise StudentError(str(error)) from None
+
+        def call(*args, **kwargs):
+            try:
+                return self._ready().call(name, args, kwargs)
+            except StudentRaised as error:
+                if error.not_implemented:
+                    raise StudentError(f"{name} is not written yet (it raises NotImplementedError)") from None
+                what = str(error)
+                raise StudentError(f"{describe_call(call, name, args, kwargs)} raised {what}{error.line}{_hint(what)}")
+            except WorkerDied as error:
+                raise StudentError(str(error)) from None
+            finally:
+                self._report()
+
+        call.__name__ = call.__qualname__ = name
+        signature = sandbox.signature(name)
+        if signature is not None:
+            call.__signature__ = signature
+        return call
+
+
+def isolated(impl: str) -> bool:
+    """Whether ``impl`` is graded through a worker process: a student's code always is, the course's own on request."""
+    chosen = os.environ.get(ISOLATION_VARIABLE, "").strip()
+    if chosen == "none":
+        return False
+    return chosen == "worker" or impl not in ("solutions", *VARIANT_FOLDERS)
+
+
+def _load_isolated(chapter: str, folder: Path, where: str):
+    from minippo.grade import LOG_VARIABLE, log_integrity
+    from minippo.sandbox import Sandbox, WorkerDied, scan_source
+
+    hide = [p for p in os.environ.get(HIDE_VARIABLE, "").split(os.pathsep) if p]
+    if os.environ.get(LOG_VARIABLE):
+        hide.append(str(Path(os.environ[LOG_VARIABLE]).parent))
+    sandbox = Sandbox(folder, chapter, hide=hide)
+    log_integrity(chapter, None, isolation=sandbox.isolation)
+    for path in [folder / f"{chapter}.py", *sorted(folder.glob("*.py"))]:
+        if path.name == f"{chapter}.py" or not path.name.startswith("ch"):
+            for note in scan_source(path, chapter):
+                log_integrity(chapter, f"{path.name} {note}")
+    student = RemoteStudent(sandbox, where)
+    try:
+        error = sandbox.start()
+    except WorkerDied as died:
+        return Broken(where, str(died))
+    student._report()
+    if error:
+        return Broken(where, error)
+    return student
 
 
 def pytest_generate_tests(metafunc):
