@@ -379,31 +379,70 @@ def _check_pytest_timeout() -> bool:
     return True
 
 
+def integrity_notes(integrity: dict, number: int) -> list[str]:
+    """What the instructor should know of one chapter's submission: its own notes and the log's."""
+    return integrity.get(number, []) + integrity.get("log", [])
+
+
+def find_submission(folder: Path) -> Path:
+    """The folder that holds a submission's chNN_*.py modules: ``folder`` itself, or the sub-folder with the most of
+    them (a submission uploaded as a zip of its folder)."""
+
+    def count(path: Path) -> int:
+        return len(list(path.glob("ch[0-9][0-9]_*.py")))
+
+    candidates = [folder] + sorted(p for p in folder.rglob("*") if p.is_dir() and not p.name.startswith((".", "_")))
+    return max(candidates, key=count) if count(folder) == 0 else folder
+
+
 def grade(
-    chapter: str | None = None, solutions: bool = False, impl: str | None = None, out=None, verbose: bool = False
+    chapter: str | None = None,
+    solutions: bool = False,
+    impl: str | None = None,
+    out=None,
+    verbose: bool = False,
+    gradescope: str | None = None,
 ) -> int:
     """Grade one chapter (or all), print the scoreboard; 0 if every test passed, 1 if not, 2 for bad input.
-    ``verbose`` lists every failing test with its message below the scoreboard."""
+    ``verbose`` lists every failing test with its message below the scoreboard; ``gradescope`` also writes the
+    results to that file in Gradescope's results.json format."""
     out = out or sys.stdout
+    started = time.monotonic()
     try:
         numbers = _chapters(chapter)
     except ValueError as error:
         print(f"minippo: error: {error}", file=sys.stderr)
+        return 2
+    if gradescope is not None and not Path(gradescope).expanduser().resolve().parent.is_dir():
+        print(f"minippo: error: no folder for the results file {gradescope}", file=sys.stderr)
         return 2
     if not _check_pytest_timeout():
         return 2
     files = chapter_files()
     if impl is None:
         impl = "solutions" if solutions else os.environ.get(IMPL_VARIABLE, "").strip() or "exercises"
+    if impl not in ("exercises", "solutions", "wrong", "right"):
+        if not Path(impl).expanduser().is_dir():
+            print(f"minippo: error: no submission folder {impl}", file=sys.stderr)
+            return 2
+        impl = str(find_submission(Path(impl).expanduser().resolve()))
     where = f"{impl}/" if impl in ("exercises", "solutions") else impl
     print(
         f"Grading {where} (chapter {', '.join(map(str, numbers))}); the time limit is per test.", file=out, flush=True
     )
-    _, results, note = run_tests(impl, [files[n] for n in numbers])
+    integrity: dict = {}
+    _, results, note = run_tests(impl, [files[n] for n in numbers], integrity=integrity)
     lines, all_passed = scoreboard(results, numbers)
     print("\n".join(lines), file=out)
     if note:
         print(f"note: {note}", file=out)
+    for number in numbers:
+        for text in integrity_notes(integrity, number):
+            print(f"integrity: {chapter_title(number)}: {text}", file=out)
+    if gradescope is not None:
+        report = gradescope_results(results, numbers, integrity, time.monotonic() - started)
+        Path(gradescope).expanduser().write_text(json.dumps(report, indent=1), encoding="utf-8")
+        print(f"Wrote the results to {gradescope}.", file=out)
     if verbose and not all_passed:
         print("", file=out)
         print("\n".join(failures_in_detail(results, numbers)), file=out)
@@ -413,7 +452,99 @@ def grade(
     return 0 if all_passed else 1
 
 
-CSV_FIELDS = ["student", "chapter", "passed", "total", "first_failure"]
+def gradescope_results(results, numbers, integrity: dict, seconds: float) -> dict:
+    """Gradescope's autograder results.json: one test entry per chapter (score = tests passed, max_score = tests),
+    its output the first failure's message and any integrity note."""
+    tests = []
+    for number in numbers:
+        mine = [r for r in results if r.chapter == number]
+        passed = sum(r.outcome == "passed" for r in mine)
+        first = next((r for r in mine if r.outcome != "passed"), None)
+        output = (first.message if first else "all passed") if mine else "no tests ran"
+        notes = integrity_notes(integrity, number)
+        if notes:
+            output += "\nIntegrity: " + "; ".join(notes)
+        tests.append(
+            {
+                "name": chapter_title(number),
+                "number": str(number),
+                "score": float(passed),
+                "max_score": float(len(mine)),
+                "status": "passed" if mine and first is None else "failed",
+                "output": output,
+                "visibility": "visible",
+            }
+        )
+    return {
+        "score": float(sum(t["score"] for t in tests)),
+        "execution_time": int(round(seconds)),
+        "output": f"Graded with minippo grade, isolation: {integrity.get('isolation', 'none')}.",
+        "stdout_visibility": "hidden",
+        "tests": tests,
+    }
+
+
+SETUP_SH = """#!/usr/bin/env bash
+# Gradescope runs this once, as root, when it builds the autograder's image: minippo's grading extra from the
+# course's repository, at the commit the zip was built for.
+set -euo pipefail
+apt-get install -y python3 python3-pip python3-venv git util-linux
+python3 -m venv /autograder/venv
+git clone {repo} /autograder/course
+git -C /autograder/course checkout {commit}
+/autograder/venv/bin/pip install -e '/autograder/course[test]'
+"""
+
+RUN_AUTOGRADER = """#!/usr/bin/env bash
+# Gradescope runs this for every submission: grade /autograder/submission into /autograder/results/results.json.
+cd /autograder/course
+mkdir -p /autograder/results
+{python} -m minippo grade {chapter}--submission /autograder/submission --gradescope /autograder/results/results.json
+exit 0
+"""
+
+
+def autograder_zip(path: str, repo: str, commit: str, chapter: str | None = None, python: str = "") -> int:
+    """Write Gradescope's autograder zip: setup.sh (installs minippo's grading extra from ``repo`` at ``commit``) and
+    run_autograder (grades /autograder/submission, ``chapter`` or every chapter). 0, or 2 for bad input."""
+    import zipfile
+
+    if not re.fullmatch(r"[0-9a-fA-F]{7,40}|[\w./-]+", commit) or commit.startswith("-"):
+        print(f"minippo: error: not a commit: {commit}", file=sys.stderr)
+        return 2
+    if not repo or any(c in repo for c in " '\"\n;&|$`") or repo.startswith("-"):
+        print(f"minippo: error: not a repository address: {repo}", file=sys.stderr)
+        return 2
+    if chapter is not None:
+        try:
+            number = _chapters(chapter)[0]
+        except ValueError as error:
+            print(f"minippo: error: {error}", file=sys.stderr)
+            return 2
+    target = Path(path).expanduser()
+    if not target.resolve().parent.is_dir():
+        print(f"minippo: error: no folder for {path}", file=sys.stderr)
+        return 2
+    run = RUN_AUTOGRADER.format(
+        python=python or "/autograder/venv/bin/python", chapter=f"{number} " if chapter is not None else ""
+    )
+    with zipfile.ZipFile(target, "w") as archive:
+        for name, text in (("setup.sh", SETUP_SH.format(repo=repo, commit=commit)), ("run_autograder", run)):
+            info = zipfile.ZipInfo(name)
+            info.external_attr = 0o755 << 16
+            archive.writestr(info, text)
+    return 0
+
+
+def csv_cell(value) -> str:
+    """A CSV cell that a spreadsheet shows as text: one line, and a leading = + - @ (a formula) quoted with '."""
+    text = " ".join(str(value).split())
+    if text[:1] in ("=", "+", "-", "@", "\t", "\r", "|", "%"):
+        text = "'" + text
+    return text
+
+
+CSV_FIELDS = ["student", "chapter", "passed", "total", "first_failure", "integrity", "isolation"]
 
 
 def grade_class(
@@ -453,7 +584,10 @@ def grade_class(
     width = max(len(s.name) for s in students + [Path("student")])
     print(f"{'student':<{width}}  {'chapter':<22}  {'passed':>7}  first failure", file=out, flush=True)
     for student in students:
-        _, results, note = run_tests(str(student.resolve()), [files[n] for n in numbers], limit_s=limit_s)
+        integrity: dict = {}
+        _, results, note = run_tests(
+            str(student.resolve()), [files[n] for n in numbers], limit_s=limit_s, integrity=integrity, hide=[root]
+        )
         for number in numbers:
             mine = [r for r in results if r.chapter == number]
             passed = sum(r.outcome == "passed" for r in mine)
@@ -461,13 +595,19 @@ def grade_class(
             comment = first.message if first else ("no tests ran" if not mine else "")
             if note and not mine:
                 comment = note
-            row = {"student": student.name, "chapter": number, "passed": passed, "total": len(mine),
-                   "first_failure": comment}  # fmt: skip
+            notes = "; ".join(integrity_notes(integrity, number))
+            row = {"student": csv_cell(student.name), "chapter": number, "passed": passed, "total": len(mine),
+                   "first_failure": csv_cell(comment), "integrity": csv_cell(notes),
+                   "isolation": integrity.get("isolation", "none")}  # fmt: skip
             rows.append(row)
             score = f"{passed}/{len(mine)}"
-            shown = comment if len(comment) <= 100 else comment[:97] + "..."
+            shown = " ".join(comment.split())
+            shown = shown if len(shown) <= 100 else shown[:97] + "..."
             shown = shown or "all passed"
-            print(f"{student.name:<{width}}  {chapter_title(number):<22}  {score:>7}  {shown}", file=out, flush=True)
+            if notes:
+                shown += f"  [integrity: {notes}]"
+            name = " ".join(student.name.split())
+            print(f"{name:<{width}}  {chapter_title(number):<22}  {score:>7}  {shown}", file=out, flush=True)
     if csv_path is not None:
         with open(Path(csv_path).expanduser(), "w", newline="", encoding="utf-8") as handle:
             writer = csv.DictWriter(handle, fieldnames=CSV_FIELDS)

@@ -202,6 +202,9 @@ class Worker:
         self.proxies: dict[int, JudgeObject] = {}
         self.mirrors: dict[tuple[int, str], tuple[np.ndarray, np.ndarray]] = {}  # (ref, name) -> (array, as sent)
         self.module = None
+        self.answers: dict[str, list[str]] = {}  # minippo's own versions of the exercise: {module: [names]}
+        self.watched: set[str] = set()
+        self.note = lambda text: None
 
     # references
     def refer(self, value):
@@ -278,6 +281,7 @@ class Worker:
             self.send({"op": "loaded", "error": _describe(error)})
             return
         self.module = module
+        self.watch_answers()
         functions = {}
         for key, value in vars(module).items():
             if callable(value) and not isinstance(value, type) and not key.startswith("__"):
@@ -296,6 +300,48 @@ class Worker:
                 self.get(header)
             elif op == "stop":
                 return
+
+    def watch_answers(self) -> None:
+        """Once the student's code has imported a minippo module that holds the exercise's answer, replace those
+        functions and classes (there and in the student's module) by ones that report their first use."""
+        for module_name, names in self.answers.items():
+            module = sys.modules.get(module_name)
+            if module is None or module_name in self.watched:
+                continue
+            self.watched.add(module_name)
+            for name in names:
+                original = getattr(module, name, None)
+                if original is None:
+                    continue
+                watched = self._watched(original, f"{module_name}.{name}")
+                setattr(module, name, watched)
+                for key, value in list(vars(self.module).items()) if self.module is not None else []:
+                    if value is original:
+                        setattr(self.module, key, watched)
+
+    def _watched(self, original, where: str):
+        note, used = self.note, []
+
+        def report():
+            if not used:
+                used.append(True)
+                note(f"calls {where}, minippo's own version of the exercise")
+
+        if isinstance(original, type):
+            init = original.__init__
+
+            def watched_init(obj, *args, **kwargs):
+                report()
+                init(obj, *args, **kwargs)
+
+            original.__init__ = watched_init
+            return original
+
+        def watched(*args, **kwargs):
+            report()
+            return original(*args, **kwargs)
+
+        return watched
 
     def get(self, header: dict) -> None:
         name = header["name"]
@@ -332,6 +378,7 @@ class Worker:
                 changed=_changed(inputs, before),
             )
             return
+        self.watch_answers()
         aliases = []
         for i, array in enumerate(arrays_in(result)):
             for k, given in enumerate(inputs):
@@ -459,6 +506,9 @@ def main() -> None:
 
     def note(text: str) -> None:
         write_frame(write_fd, {"op": "note", "text": text})
+
+    worker.note = note
+    worker.answers = {str(k): [str(n) for n in v] for k, v in header.get("answers", {}).items()}
 
     import inspect  # noqa: F401 - loaded before the guard, for signatures
     import linecache  # noqa: F401
