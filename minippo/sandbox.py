@@ -529,10 +529,10 @@ def scan_source(path: Path, chapter: str) -> list[str]:
                 modules.add(module)
         if isinstance(node, ast.Attribute):
             names.add(node.attr)
-        elif isinstance(node, ast.Constant) and isinstance(node.value, str):
-            names.add(node.value)
         elif isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "__import__":
             notes.append("imports modules by name (__import__)")
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "getattr":
+            names.update(a.value for a in node.args[1:2] if isinstance(a, ast.Constant) and isinstance(a.value, str))
     for module in sorted(modules):
         for name in answers[module]:
             if name in names:
