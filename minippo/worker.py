@@ -510,6 +510,11 @@ def main() -> None:
     worker.note = note
     worker.answers = {str(k): [str(n) for n in v] for k, v in header.get("answers", {}).items()}
 
+    for name in header.get("preload", []):
+        try:
+            __import__(str(name))
+        except Exception:  # noqa: BLE001 - the student's own import will say what is wrong
+            pass
     import inspect  # noqa: F401 - loaded before the guard, for signatures
     import linecache  # noqa: F401
     import traceback  # noqa: F401

@@ -22,7 +22,8 @@ from minippo import grade, sandbox
 ROOT = Path(__file__).resolve().parents[1]
 SOLUTION = (ROOT / "solutions" / "ch05_clipping.py").read_text(encoding="utf-8")
 STUB = (ROOT / "exercises" / "ch05_clipping.py").read_text(encoding="utf-8")
-CHEAT_TAIL = STUB  # every cheat below keeps the stubs' functions, so the points can only come from the cheat
+# every cheat below keeps the stubs' functions, so the points can only come from the cheat
+CHEAT_TAIL = STUB.replace("from __future__ import annotations\n", "")
 
 # each: the code a submission runs on import, before the stubs (or in place of them)
 CHEATS = {

@@ -314,7 +314,8 @@ def _load_isolated(chapter: str, folder: Path, where: str):
         error = sandbox.start()
     except WorkerDied as died:
         return Broken(where, str(died))
-    student._report()
+    finally:
+        student._report()
     if error:
         return Broken(where, error)
     return student
