@@ -7,9 +7,18 @@ log as soon as it is known (this module is also the pytest plugin that writes it
 stopped still reports what finished; if student code kills the test process itself, the test that was running is
 failed and the rest run in a new process.
 
-Which code is graded: exercises/ by default; solutions/ with --solutions; or the environment variable MINIPPO_IMPL
-(``exercises``, ``solutions``, or a folder holding chNN_*.py modules). With --class, every sub-folder of FOLDER is one
-student's folder of chNN_*.py modules, graded in its own process.
+Which code is graded: exercises/ by default; solutions/ with --solutions; a folder with --submission FOLDER or the
+environment variable MINIPPO_IMPL (``exercises``, ``solutions``, or a folder holding chNN_*.py modules). With --class,
+every sub-folder of FOLDER is one student's folder of chNN_*.py modules, graded in its own process.
+
+A student's code never runs in the test process: the tests call it through a worker process (minippo.sandbox and
+minippo.worker) that cannot see the repository, the other students or this log, under CPU, memory, file-size and
+process limits. Every record of the log is signed with a key only this process and its tests know, so a record the
+tests did not write is ignored (and reported). What the worker or the source scan saw a submission do that an
+instructor should know of (importing the reference, using minippo's own version of the exercise, reaching for the
+grader's files) goes to the integrity column; how far the worker was isolated, to the isolation column.
+``--gradescope FILE`` writes the results in Gradescope's results.json format; ``--autograder-zip`` builds the zip
+Gradescope runs.
 
 The chapters are found, not listed: a chapter is graded when tests/exercises/test_chNN_<topic>.py exists, and its
 book name (``minippo grade the-min``) comes from book/NN-<name>.md. A new chapter needs only those two files.
@@ -20,6 +29,7 @@ from __future__ import annotations
 import csv
 import hashlib
 import hmac
+import io
 import json
 import os
 import re
@@ -431,7 +441,8 @@ def grade(
         f"Grading {where} (chapter {', '.join(map(str, numbers))}); the time limit is per test.", file=out, flush=True
     )
     integrity: dict = {}
-    _, results, note = run_tests(impl, [files[n] for n in numbers], integrity=integrity)
+    hide = [Path(gradescope).expanduser().resolve()] if gradescope is not None else []
+    _, results, note = run_tests(impl, [files[n] for n in numbers], integrity=integrity, hide=hide)
     lines, all_passed = scoreboard(results, numbers)
     print("\n".join(lines), file=out)
     if note:
@@ -441,7 +452,7 @@ def grade(
             print(f"integrity: {chapter_title(number)}: {text}", file=out)
     if gradescope is not None:
         report = gradescope_results(results, numbers, integrity, time.monotonic() - started)
-        Path(gradescope).expanduser().write_text(json.dumps(report, indent=1), encoding="utf-8")
+        write_fresh(Path(gradescope).expanduser(), json.dumps(report, indent=1))
         print(f"Wrote the results to {gradescope}.", file=out)
     if verbose and not all_passed:
         print("", file=out)
@@ -536,6 +547,15 @@ def autograder_zip(path: str, repo: str, commit: str, chapter: str | None = None
     return 0
 
 
+def write_fresh(path: Path, text: str) -> None:
+    """Write ``text`` to a new file at ``path``: whatever stood there (a link a submission left, say) is removed
+    first, so the file written is the grader's own."""
+    if path.is_symlink() or path.is_file():
+        path.unlink()
+    with open(path, "x", encoding="utf-8", newline="") as handle:
+        handle.write(text)
+
+
 def csv_cell(value) -> str:
     """A CSV cell that a spreadsheet shows as text: one line, and a leading = + - @ (a formula) quoted with '."""
     text = " ".join(str(value).split())
@@ -581,12 +601,13 @@ def grade_class(
         f"Grading {len(students)} students in {folder} (chapter {', '.join(map(str, numbers))}).", file=out, flush=True
     )
     rows = []
+    hidden = [root.resolve()] + ([Path(csv_path).expanduser().resolve()] if csv_path is not None else [])
     width = max(len(s.name) for s in students + [Path("student")])
     print(f"{'student':<{width}}  {'chapter':<22}  {'passed':>7}  first failure", file=out, flush=True)
     for student in students:
         integrity: dict = {}
         _, results, note = run_tests(
-            str(student.resolve()), [files[n] for n in numbers], limit_s=limit_s, integrity=integrity, hide=[root]
+            str(student.resolve()), [files[n] for n in numbers], limit_s=limit_s, integrity=integrity, hide=hidden
         )
         for number in numbers:
             mine = [r for r in results if r.chapter == number]
@@ -609,9 +630,10 @@ def grade_class(
             name = " ".join(student.name.split())
             print(f"{name:<{width}}  {chapter_title(number):<22}  {score:>7}  {shown}", file=out, flush=True)
     if csv_path is not None:
-        with open(Path(csv_path).expanduser(), "w", newline="", encoding="utf-8") as handle:
-            writer = csv.DictWriter(handle, fieldnames=CSV_FIELDS)
-            writer.writeheader()
-            writer.writerows(rows)
+        table = io.StringIO()
+        writer = csv.DictWriter(table, fieldnames=CSV_FIELDS)
+        writer.writeheader()
+        writer.writerows(rows)
+        write_fresh(Path(csv_path).expanduser(), table.getvalue())
         print(f"Wrote {len(rows)} rows to {csv_path}.", file=out)
     return 0
