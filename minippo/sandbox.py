@@ -163,15 +163,17 @@ def _copy_folder(source: Path, target: Path) -> None:
 
 
 class Sandbox:
-    """One student's module of one chapter, loaded in a worker process that is restarted after it dies."""
+    """One student's folder: its chapter modules loaded in one worker process, which is started again (and loads
+    each module again when first used) after it dies."""
 
-    def __init__(self, folder: Path, chapter: str, hide=(), limits: dict | None = None):
-        self.folder, self.chapter = Path(folder), chapter
+    def __init__(self, folder: Path, hide=(), limits: dict | None = None):
+        self.folder = Path(folder)
         self.limits = dict(LIMITS, **(limits or {}))
         self.hide = [Path(p) for p in (ROOT, *hide)]
         self.isolation = isolation()
-        self.notes: list[str] = []
-        self.functions: dict[str, list | None] = {}
+        self.notes: list[str] = []  # what the worker reported, in order; take_notes() hands out the new ones
+        self._taken = 0
+        self.functions: dict[str, dict[str, list | None]] = {}  # {module: {function: its parameters}}
         self.process = None
         self.workdir = None
         self._read = self._write = None
@@ -182,9 +184,10 @@ class Sandbox:
         _ALL.append(self)
 
     # the process
-    def start(self) -> str | None:
-        """Start the worker and import the module there; the import's error in words, or None."""
+    def start(self) -> None:
+        """Start a worker (raises WorkerDied if it cannot even begin)."""
         self.close()
+        self.functions = {}
         self.workdir = Path(tempfile.mkdtemp(prefix="minippo-worker-"))
         student, lib, run = self.workdir / "student", self.workdir / "lib", self.workdir / "run"
         _copy_folder(self.folder, student)
@@ -216,19 +219,39 @@ class Sandbox:
             "path": [str(student), str(lib)],
             "forbidden": forbidden,
             "limits": self.limits,
-            "answers": LIBRARY_ANSWERS.get(self.chapter, {}),
+            "answers": _all_answers(),
             "preload": ["minippo"] if mentions else [],
         }
-        path = student / f"{self.chapter}.py"
         try:
             write_frame(self._write, start)
-            write_frame(self._write, {"op": "load", "module": self.chapter, "path": str(path)})
+        except OSError:
+            self.close()
+            raise WorkerDied("the process that runs the code could not be started") from None
+
+    def load(self, chapter: str) -> str | None:
+        """Import the student's ``chapter`` module in the worker (starting one if needed); the import's error in
+        words, or None."""
+        if not self.alive():
+            self.start()
+        try:
+            path = self.workdir / "student" / f"{chapter}.py"
+            self._send({"op": "load", "module": chapter, "path": str(path)})
             header, _ = self._receive(("loaded",))
         except BaseException:
             self.close()
             raise
-        self.functions = header.get("functions") or {}
-        return header.get("error")
+        if header.get("error"):
+            return str(header["error"])
+        self.functions[chapter] = header.get("functions") or {}
+        return None
+
+    def loaded(self, chapter: str) -> bool:
+        return self.alive() and chapter in self.functions
+
+    def take_notes(self) -> list[str]:
+        new = self.notes[self._taken :]
+        self._taken = len(self.notes)
+        return new
 
     def _hidden(self) -> list[Path]:
         """The folders to cover in the worker's mount namespace: those that exist and do not hold the worker's own."""
@@ -412,7 +435,7 @@ class Sandbox:
                 self._mirrored[(ref, name)] = current.copy()
 
     # what the tests use
-    def call(self, name: str, args: tuple, kwargs: dict):
+    def call(self, chapter: str, name: str, args: tuple, kwargs: dict):
         """Call the student's ``name`` with these arguments; its result, with every array argument it changed in place
         changed here too. Raises StudentRaised, or WorkerDied (after which the next call starts a new worker)."""
         self._objects.clear()
@@ -420,7 +443,7 @@ class Sandbox:
         self._mirrored.clear()
         self._fresh = True
         try:
-            self._send({"op": "call", "name": name}, args=list(args), kwargs=dict(kwargs))
+            self._send({"op": "call", "module": chapter, "name": name}, args=list(args), kwargs=dict(kwargs))
             header, blobs = self._receive(("done", "raised"))
             inputs = list(arrays_in((list(args), kwargs)))
             changed = unpack(header.get("changed", []), blobs, self._resolve) or []
@@ -448,17 +471,19 @@ class Sandbox:
             raise
         finally:
             self._objects.clear()
+            self._callable.clear()
+            self._mirrored.clear()
 
-    def get(self, name: str):
+    def get(self, chapter: str, name: str):
         """A module attribute that is not a function (a constant); raises AttributeError when there is none."""
-        self._send({"op": "get", "name": name})
+        self._send({"op": "get", "module": chapter, "name": name})
         header, blobs = self._receive(("value",))
         if header.get("missing"):
             raise AttributeError(name)
         return unpack(header.get("value"), blobs, self._resolve)
 
-    def signature(self, name: str) -> inspect.Signature | None:
-        described = self.functions.get(name)
+    def signature(self, chapter: str, name: str) -> inspect.Signature | None:
+        described = self.functions.get(chapter, {}).get(name)
         if not described:
             return None
         try:
@@ -496,6 +521,25 @@ def _swap_arrays(value, aliases: dict, counter=None):
     if isinstance(value, dict):
         return {key: _swap_arrays(item, aliases, counter) for key, item in value.items()}
     return value
+
+
+def _all_answers() -> dict[str, list[str]]:
+    merged: dict[str, set] = {}
+    for modules in LIBRARY_ANSWERS.values():
+        for module, names in modules.items():
+            merged.setdefault(module, set()).update(names)
+    return {module: sorted(names) for module, names in merged.items()}
+
+
+def answer_note(note: str, chapter: str) -> str | None:
+    """A worker's note as the chapter's integrity note: "calls minippo.x.f" only when f answers this chapter's
+    exercise (a later chapter may use an earlier one's from the library); other notes as they are."""
+    if not note.startswith("calls "):
+        return note
+    module, _, name = note[len("calls ") :].rpartition(".")
+    if name in LIBRARY_ANSWERS.get(chapter, {}).get(module, []):
+        return f"calls {module}.{name}, minippo's own version of the exercise"
+    return None
 
 
 _ALL: list[Sandbox] = []

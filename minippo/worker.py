@@ -201,9 +201,10 @@ class Worker:
         self.mine: dict[int, object] = {}  # the student's objects the judge holds handles to
         self.proxies: dict[int, JudgeObject] = {}
         self.mirrors: dict[tuple[int, str], tuple[np.ndarray, np.ndarray]] = {}  # (ref, name) -> (array, as sent)
-        self.module = None
-        self.answers: dict[str, list[str]] = {}  # minippo's own versions of the exercise: {module: [names]}
+        self.modules: dict[str, object] = {}  # the student's modules loaded so far, by name (chNN_topic)
+        self.answers: dict[str, list[str]] = {}  # minippo's own versions of the exercises: {module: [names]}
         self.watched: set[str] = set()
+        self.used: set[str] = set()  # the watched functions used during the current call
         self.note = lambda text: None
 
     # references
@@ -280,7 +281,7 @@ class Worker:
         except BaseException as error:  # noqa: BLE001 - a syntax error, sys.exit or anything else while importing
             self.send({"op": "loaded", "error": _describe(error)})
             return
-        self.module = module
+        self.modules[name] = module
         self.watch_answers()
         functions = {}
         for key, value in vars(module).items():
@@ -315,17 +316,16 @@ class Worker:
                     continue
                 watched = self._watched(original, f"{module_name}.{name}")
                 setattr(module, name, watched)
-                for key, value in list(vars(self.module).items()) if self.module is not None else []:
-                    if value is original:
-                        setattr(self.module, key, watched)
+                for student in self.modules.values():
+                    for key, value in list(vars(student).items()):
+                        if value is original:
+                            setattr(student, key, watched)
 
     def _watched(self, original, where: str):
-        note, used = self.note, []
-
-        def report():
-            if not used:
-                used.append(True)
-                note(f"calls {where}, minippo's own version of the exercise")
+        def report():  # once per call: the judge keeps the notes that concern the chapter of that call
+            if where not in self.used:
+                self.used.add(where)
+                self.note(f"calls {where}")
 
         if isinstance(original, type):
             init = original.__init__
@@ -344,17 +344,19 @@ class Worker:
         return watched
 
     def get(self, header: dict) -> None:
-        name = header["name"]
-        if self.module is None or not hasattr(self.module, name):
+        module, name = self.modules.get(header.get("module")), header["name"]
+        if module is None or not hasattr(module, name):
             self.send({"op": "value", "missing": True})
             return
-        self.send({"op": "value", "missing": False}, value=getattr(self.module, name))
+        self.send({"op": "value", "missing": False}, value=getattr(module, name))
 
     def call(self, header: dict, blobs: list) -> None:
+        self.used.clear()
         try:
-            function = self.module if header.get("ref") is None else self.mine[header["ref"]]
             if header.get("ref") is None:
-                function = getattr(self.module, header["name"])
+                function = getattr(self.modules[header["module"]], header["name"])
+            else:
+                function = self.mine[header["ref"]]
             args = unpack(header["args"], blobs, self.resolve)
             kwargs = unpack(header["kwargs"], blobs, self.resolve)
         except Exception as error:  # noqa: BLE001

@@ -188,11 +188,11 @@ def test_arrays_and_scalars_cross_with_their_dtype_and_in_place_changes_come_bac
             return x, np.float32(1.5), 3, (y, [y.astype(np.int8)])
         """,
     )
-    box = sandbox.Sandbox(folder, "ch05_clipping")
+    box = sandbox.Sandbox(folder)
     try:
-        assert box.start() is None
+        assert box.load("ch05_clipping") is None
         x, y = np.arange(3.0), np.ones((2, 2))
-        same_x, scalar, integer, (same_y, (small,)) = box.call("f", (x, y), {})
+        same_x, scalar, integer, (same_y, (small,)) = box.call("ch05_clipping", "f", (x, y), {})
         assert np.array_equal(x, [0.0, 2.0, 4.0])  # changed in place there, so here too
         assert same_x is x and same_y is y  # an input returned is the caller's own array, as in one process
         assert type(scalar) is np.float32 and scalar == 1.5 and type(integer) is int
@@ -214,18 +214,18 @@ def test_the_worker_reaches_only_the_exposed_attributes_of_the_judge_s_objects(t
     )
     from minippo.ppo import Config
 
-    box = sandbox.Sandbox(folder, "ch05_clipping")
+    box = sandbox.Sandbox(folder)
     try:
-        assert box.start() is None
-        assert box.call("peek", (Config(), "clip_epsilon"), {}) == 0.2
+        assert box.load("ch05_clipping") is None
+        assert box.call("ch05_clipping", "peek", (Config(), "clip_epsilon"), {}) == 0.2
         # the proxy's own class, a handle of the worker's: nothing of the judge's Config
-        assert isinstance(box.call("peek", (Config(), "__class__"), {}), sandbox.StudentObject)
+        assert isinstance(box.call("ch05_clipping", "peek", (Config(), "__class__"), {}), sandbox.StudentObject)
         for name in ("__dict__", "to_dict", "_private"):
             with pytest.raises(sandbox.StudentRaised) as raised:
-                box.call("peek", (Config(), name), {})
+                box.call("ch05_clipping", "peek", (Config(), name), {})
             assert raised.value.kind == "AttributeError"
         with pytest.raises(sandbox.StudentRaised):
-            box.call("call", (Config(),), {})
+            box.call("ch05_clipping", "call", (Config(),), {})
     finally:
         box.close()
 
@@ -246,13 +246,13 @@ def test_the_worker_cannot_import_the_reference_or_reach_the_repository(tmp_path
             import solutions
         """,
     )
-    box = sandbox.Sandbox(folder, "ch05_clipping")
+    box = sandbox.Sandbox(folder)
     try:
-        assert box.start() is None
-        assert box.call("where", (), {}) == []
+        assert box.load("ch05_clipping") is None
+        assert box.call("ch05_clipping", "where", (), {}) == []
         for name in ("read", "import_solutions"):
             with pytest.raises(sandbox.StudentRaised):
-                box.call(name, (), {})
+                box.call("ch05_clipping", name, (), {})
         assert any("README.md" in note or "solutions" in note for note in box.notes), box.notes
     finally:
         box.close()

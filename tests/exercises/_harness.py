@@ -234,22 +234,26 @@ class RemoteStudent:
     result (and the arguments' in-place changes). Errors read as Student's do: the call with its input shapes, the
     line of the student's code, a hint."""
 
-    def __init__(self, sandbox, where: str):
-        self._sandbox, self._where = sandbox, where
-        self._reported = 0
+    def __init__(self, sandbox, chapter: str, where: str):
+        self._sandbox, self._chapter, self._where = sandbox, chapter, where
 
     def _report(self) -> None:
-        """Pass the worker's integrity notes to the grader's log, each once."""
+        """Pass the worker's new integrity notes to the grader's log, as notes of this chapter."""
         from minippo.grade import log_integrity
+        from minippo.sandbox import answer_note
 
-        for note in self._sandbox.notes[self._reported :]:
-            log_integrity(self._sandbox.chapter, note)
-        self._reported = len(self._sandbox.notes)
+        for note in self._sandbox.take_notes():
+            note = answer_note(note, self._chapter)
+            if note:
+                log_integrity(self._chapter, note)
 
     def _ready(self):
-        if not self._sandbox.alive():  # a time limit or a crash ended the last worker: start a new one
-            error = self._sandbox.start()
-            self._report()
+        """The sandbox with this module loaded (again, after a time limit or a crash ended the last worker)."""
+        if not self._sandbox.loaded(self._chapter):
+            try:
+                error = self._sandbox.load(self._chapter)
+            finally:
+                self._report()
             if error:
                 pytest.fail(f"{self._where} could not be imported: {error}", pytrace=False)
         return self._sandbox
@@ -259,10 +263,13 @@ class RemoteStudent:
             raise AttributeError(name)
         from minippo.sandbox import StudentRaised, WorkerDied
 
-        sandbox = self._ready()
-        if name not in sandbox.functions:
+        try:
+            sandbox = self._ready()
+        except WorkerDied as error:
+            raise StudentError(str(error)) from None
+        if name not in sandbox.functions[self._chapter]:
             try:
-                return sandbox.get(name)
+                return sandbox.get(self._chapter, name)
             except AttributeError:
                 pytest.fail(f"{self._where} has no function {name}: keep the names of the exercise", pytrace=False)
             except WorkerDied as error:
@@ -270,7 +277,7 @@ class RemoteStudent:
 
         def call(*args, **kwargs):
             try:
-                return self._ready().call(name, args, kwargs)
+                return self._ready().call(self._chapter, name, args, kwargs)
             except StudentRaised as error:
                 if error.not_implemented:
                     raise StudentError(f"{name} is not written yet (it raises NotImplementedError)") from None
@@ -282,7 +289,7 @@ class RemoteStudent:
                 self._report()
 
         call.__name__ = call.__qualname__ = name
-        signature = sandbox.signature(name)
+        signature = sandbox.signature(self._chapter, name)
         if signature is not None:
             call.__signature__ = signature
         return call
@@ -296,29 +303,32 @@ def isolated(impl: str) -> bool:
     return chosen == "worker" or impl not in ("solutions", *VARIANT_FOLDERS)
 
 
+_sandboxes: dict[Path, object] = {}  # one worker per student folder, for all its chapters
+
+
 def _load_isolated(chapter: str, folder: Path, where: str):
     from minippo.grade import LOG_VARIABLE, log_integrity
     from minippo.sandbox import Sandbox, WorkerDied, scan_source
 
-    hide = [p for p in os.environ.get(HIDE_VARIABLE, "").split(os.pathsep) if p]
-    if os.environ.get(LOG_VARIABLE):
-        hide.append(str(Path(os.environ[LOG_VARIABLE]).parent))
-    sandbox = Sandbox(folder, chapter, hide=hide)
+    if folder not in _sandboxes:
+        hide = [p for p in os.environ.get(HIDE_VARIABLE, "").split(os.pathsep) if p]
+        if os.environ.get(LOG_VARIABLE):
+            hide.append(str(Path(os.environ[LOG_VARIABLE]).parent))
+        _sandboxes[folder] = Sandbox(folder, hide=hide)
+    sandbox = _sandboxes[folder]
     log_integrity(chapter, None, isolation=sandbox.isolation)
     for path in [folder / f"{chapter}.py", *sorted(folder.glob("*.py"))]:
         if path.name == f"{chapter}.py" or not path.name.startswith("ch"):
             for note in scan_source(path, chapter):
                 log_integrity(chapter, f"{path.name} {note}")
-    student = RemoteStudent(sandbox, where)
+    student = RemoteStudent(sandbox, chapter, where)
     try:
-        error = sandbox.start()
+        error = sandbox.load(chapter)
     except WorkerDied as died:
-        return Broken(where, str(died))
+        error = str(died)
     finally:
         student._report()
-    if error:
-        return Broken(where, error)
-    return student
+    return Broken(where, error) if error else student
 
 
 def pytest_generate_tests(metafunc):
