@@ -503,7 +503,7 @@ apt-get install -y python3 python3-pip python3-venv git util-linux
 python3 -m venv /autograder/venv
 git clone {repo} /autograder/course
 git -C /autograder/course checkout {commit}
-/autograder/venv/bin/pip install -e '/autograder/course[test]'
+/autograder/venv/bin/pip install -e '/autograder/course[grade]'
 """
 
 RUN_AUTOGRADER = """#!/usr/bin/env bash

@@ -21,7 +21,7 @@ import sys
 import numpy as np
 
 NUMERIC_KINDS = "biufc"
-MAX_FRAME = 1 << 30  # a frame larger than this is a broken or hostile peer
+MAX_FRAME = 1 << 28  # a frame larger than this is a broken or hostile peer
 MAX_DEPTH = 64
 
 
