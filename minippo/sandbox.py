@@ -140,8 +140,9 @@ while [ "$n" -gt 0 ]; do
     mount -t tmpfs -o ro,size=4k,mode=0555 minippo-hidden "$1" || exit 97
     shift; n=$((n - 1))
 done
-exec setpriv --bounding-set=-all --inh-caps=-all --no-new-privs "$@"
-"""
+setpriv --bounding-set=-all --inh-caps=-all --no-new-privs "$@"
+exit $?
+"""  # not exec: the shell stays as the namespace's first process and says how the worker ended (128 + a signal)
 
 
 def _copy_folder(source: Path, target: Path) -> None:
@@ -299,13 +300,21 @@ class Sandbox:
         if code is None:
             return "the process running it stopped answering"
         if code < 0:
-            try:
-                return f"killed by signal {signal.Signals(-code).name}"
-            except ValueError:
-                return f"killed by signal {-code}"
+            return self._death_by_signal(code)
         if code == 97:
             return "the grader could not hide the course's files from it"
+        if self.isolation == "namespaces" and 128 < code < 128 + 65:
+            code = 128 - code  # the shell's way of saying "killed by signal code - 128"
+            return self._death_by_signal(code)
         return f"it exited with code {code}: does the code call sys.exit or os._exit?"
+
+    @staticmethod
+    def _death_by_signal(code: int) -> str:
+        try:
+            name = signal.Signals(-code).name
+            return f"killed by signal {name}" + (": it used up its CPU time" if name == "SIGXCPU" else "")
+        except ValueError:
+            return f"killed by signal {-code}"
 
     # talking to the worker
     def _send(self, header: dict, **values) -> None:

@@ -446,7 +446,9 @@ def apply_limits(limits: dict) -> None:
              "processes": resource.RLIMIT_NPROC, "core_bytes": resource.RLIMIT_CORE}  # fmt: skip
     for key, value in limits.items():
         if key in names and value is not None:
-            resource.setrlimit(names[key], (int(value), int(value)))
+            # CPU: SIGXCPU at the limit, SIGKILL a little later for code that catches it
+            hard = int(value) + 5 if key == "cpu_s" else int(value)
+            resource.setrlimit(names[key], (int(value), hard))
 
 
 REFUSED_EVENTS = ("os.fork", "os.forkpty", "os.exec", "os.posix_spawn", "os.spawn", "os.system", "subprocess.Popen",

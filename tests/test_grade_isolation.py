@@ -352,3 +352,63 @@ def test_bad_gradescope_arguments_get_one_line_and_exit_code_2(args, message):
     assert result.returncode == 2 and result.stdout == "", result.stdout + result.stderr
     assert result.stderr.startswith("minippo: error: ") and message in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
+
+
+# the limits: each abuse costs the call it is in, and the next call gets a working worker again
+
+ABUSES = {
+    "forks": ("import os\n\ndef f():\n    for _ in range(8):\n        os.fork()\n    return 1", "os.fork"),
+    "runs_a_command": ("import subprocess\n\ndef f():\n    return subprocess.run(['true']).returncode", "subprocess"),
+    "hogs_memory": ("def f():\n    return len(bytearray(16 << 30))", "MemoryError"),
+    "fills_the_disk": (
+        "def f():\n    with open('filler', 'wb') as out:\n        for _ in range(64):\n"
+        "            out.write(bytes(1 << 20))\n    return 1",
+        "File too large",
+    ),
+    "exits": ("import os\n\ndef f():\n    os._exit(3)", "exited with code 3"),
+    "burns_the_cpu": ("def f():\n    while True:\n        pass", "SIGXCPU"),
+    "calls_c": ("import ctypes\n\ndef f():\n    return ctypes.CDLL(None).getpid()", "ctypes"),
+}
+
+
+@pytest.mark.timeout(120)
+@pytest.mark.parametrize("abuse", list(ABUSES))
+def test_an_abuse_costs_its_own_call_only(tmp_path, abuse):
+    code, words = ABUSES[abuse]
+    folder = make_folder(tmp_path, code + "\n\ndef g(x):\n    return x + 1\n")
+    box = sandbox.Sandbox(folder, limits={"cpu_s": 3})
+    try:
+        assert box.load("ch05_clipping") is None
+        with pytest.raises((sandbox.StudentRaised, sandbox.WorkerDied)) as failed:
+            box.call("ch05_clipping", "f", (), {})
+        assert words in str(failed.value) + " ".join(box.notes), (str(failed.value), box.notes)
+        if not box.alive():
+            assert box.load("ch05_clipping") is None
+        assert box.call("ch05_clipping", "g", (np.float64(1.0),), {}) == 2.0
+    finally:
+        box.close()
+
+
+@pytest.mark.skipif(sandbox.isolation() != "namespaces", reason="no mount and PID namespaces on this machine")
+def test_with_namespaces_the_repository_and_the_class_are_not_there_at_all(tmp_path):
+    (tmp_path / "class" / "alice").mkdir(parents=True)
+    (tmp_path / "class" / "alice" / "ch05_clipping.py").write_text(SOLUTION)
+    (tmp_path / "class" / "bob").mkdir()
+    # os.stat is below the worker's guard (it reports opening and listing): what it finds is what the namespace shows
+    folder = make_folder(
+        tmp_path / "class" / "bob",
+        f"""
+        import os
+
+        def look():
+            paths = [{str(ROOT / "solutions" / "ch05_clipping.py")!r}, {str(tmp_path / "class" / "alice")!r}]
+            return [os.path.exists(path) for path in paths], sum(name.isdigit() for name in os.listdir("/proc"))
+        """,
+    )
+    box = sandbox.Sandbox(folder, hide=[tmp_path / "class"])
+    try:
+        assert box.load("ch05_clipping") is None
+        found, processes = box.call("ch05_clipping", "look", (), {})
+        assert found == [False, False] and processes <= 3, (found, processes)  # the shell, the worker
+    finally:
+        box.close()
