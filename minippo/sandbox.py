@@ -42,7 +42,7 @@ LIMITS = {
     "core_bytes": 0,
 }
 STUDENT_FOLDER_BYTES = 20 << 20  # a student's folder larger than this is not copied whole
-START_LIMIT_S = 60.0
+MAX_NOTES = 50
 
 # the judge's objects the worker may use, by class name: the attributes and methods it may read or call ("*": every
 # attribute that is not callable, as for a config); anything else crosses as a handle it can only pass back
@@ -201,6 +201,9 @@ class Sandbox:
         if self.isolation == "namespaces":
             command = ["unshare", "--mount", "--pid", "--fork", "--kill-child", "--mount-proc", "sh", "-c",
                        HIDE_SCRIPT, "sh", str(len(hidden)), *hidden, *command]  # fmt: skip
+        elif os.getuid() == 0 and shutil.which("setpriv"):
+            # root without its capabilities: it cannot read another process's memory or environment
+            command = ["setpriv", "--bounding-set=-all", "--inh-caps=-all", "--no-new-privs", *command]
         env = {"PATH": os.environ.get("PATH", os.defpath), "HOME": str(run), "LANG": "C.UTF-8", "TMPDIR": str(run),
                "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}  # fmt: skip
         try:
@@ -343,7 +346,7 @@ class Sandbox:
             op = header.get("op")
             if op == "note":
                 text = str(header.get("text", ""))[:300]
-                if text not in self.notes:
+                if text not in self.notes and len(self.notes) < MAX_NOTES:
                     self.notes.append(text)
                 continue
             try:
@@ -392,8 +395,11 @@ class Sandbox:
                 name = str(header.get("name"))
                 if not self._allowed(target, name):
                     raise AttributeError(f"the grader's {type(target).__name__} does not offer {name} to graded code")
-                if kind == "setattr":
-                    setattr(target, name, unpack(header.get("value"), blobs, self._resolve))
+                if kind == "setattr":  # only an array for an array (agent.params = new values, say)
+                    value = unpack(header.get("value"), blobs, self._resolve)
+                    if not (isinstance(getattr(target, name, None), np.ndarray) and isinstance(value, np.ndarray)):
+                        raise AttributeError(f"graded code may not set {name} of the grader's {type(target).__name__}")
+                    setattr(target, name, value)
                     self._mirrored.pop((ref, name), None)
                 value = getattr(target, name)
                 if isinstance(value, np.ndarray):

@@ -136,7 +136,7 @@ def read_frame(fd: int) -> tuple[dict, list]:
         raise WireError("too many arrays in one frame")
     try:
         header = json.loads(read_exactly(fd, size))
-    except ValueError as error:
+    except (ValueError, RecursionError) as error:
         raise WireError("a frame whose header is not JSON") from error
     if not isinstance(header, dict):
         raise WireError("a frame whose header is not an object")
