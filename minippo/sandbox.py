@@ -78,7 +78,7 @@ LIBRARY_ANSWERS = {
                             "minippo.rlhf": ["kl_shaped_rewards", "train_rlhf"]},
 }  # fmt: skip
 # what no submission needs: the reference, the tests, the grader
-FORBIDDEN_IMPORTS = ("solutions", "exercises", "_harness", "pytest", "_pytest", "minippo.grade", "minippo.sandbox",
+FORBIDDEN_IMPORTS = ("solutions", "_harness", "pytest", "_pytest", "minippo.grade", "minippo.sandbox",
                      "minippo.worker", "tests")  # fmt: skip
 
 
@@ -193,6 +193,10 @@ class Sandbox:
         student, lib, run = self.workdir / "student", self.workdir / "lib", self.workdir / "run"
         _copy_folder(self.folder, student)
         shutil.copytree(PACKAGE, lib / "minippo", ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+        # ``from exercises.ch06_the_min import ...`` (one exercise using another, as in the repository) finds the
+        # student's own modules
+        (lib / "exercises").mkdir()
+        (lib / "exercises" / "__init__.py").write_text(f"__path__ = [{str(student)!r}]\n", encoding="utf-8")
         run.mkdir()
         from_judge, to_worker = os.pipe()  # (read end, write end)
         from_worker, to_judge = os.pipe()

@@ -487,7 +487,7 @@ def install_guard(forbidden: list[str], note) -> None:
                      "os.remove", "os.rmdir", "os.truncate", "os.chmod", "os.utime"):  # fmt: skip
             if args and hidden(args[0]):
                 refuse(f"touched {os.fsdecode(args[0]) if not isinstance(args[0], int) else args[0]}")
-        elif event == "import" and args and str(args[0]).split(".")[0] in ("solutions", "exercises", "_harness"):
+        elif event == "import" and args and str(args[0]).split(".")[0] in ("solutions", "_harness"):
             refuse(f"imported {args[0]}")
         elif event.startswith(REFUSED_EVENTS):
             refuse(f"used {event}")

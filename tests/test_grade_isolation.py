@@ -89,7 +89,9 @@ def write_class(folder: Path) -> None:
     for name, code in CHEATS.items():
         (folder / name).mkdir(parents=True)
         code = code.replace("__CLASS__", repr(str(folder)))
-        (folder / name / "ch05_clipping.py").write_text(code + "\n" + CHEAT_TAIL, encoding="utf-8")
+        # a cheat on import runs before the stubs; a cheating function replaces the stub's
+        text = CHEAT_TAIL + "\n" + code if "def clip_fraction" in code else code + "\n" + CHEAT_TAIL
+        (folder / name / "ch05_clipping.py").write_text(text, encoding="utf-8")
     (folder / "honest").mkdir()
     (folder / "honest" / "ch05_clipping.py").write_text(SOLUTION, encoding="utf-8")
     (folder / "library").mkdir()
@@ -410,5 +412,45 @@ def test_with_namespaces_the_repository_and_the_class_are_not_there_at_all(tmp_p
         assert box.load("ch05_clipping") is None
         found, processes = box.call("ch05_clipping", "look", (), {})
         assert found == [False, False] and processes <= 3, (found, processes)  # the shell, the worker
+    finally:
+        box.close()
+
+
+@pytest.mark.timeout(1200)
+def test_the_right_variants_keep_their_full_score_through_the_worker(tmp_path):
+    """Each other correct way of writing an exercise (tests/exercises/right/), laid out as a student's folder: the
+    reference module with the variant's functions swapped in, as load_wrong_variant swaps them in one process."""
+    right = ROOT / "tests" / "exercises" / "right"
+    rejected, graded = [], 0
+    for test_file in grade.chapter_files().values():
+        chapter = test_file.stem[5:]
+        if not (right / f"{chapter}.py").exists():
+            continue
+        variants_text = (right / f"{chapter}.py").read_text(encoding="utf-8")
+        names = subprocess.run(
+            [sys.executable, "-c", f"import runpy; print(' '.join(runpy.run_path({str(right / f'{chapter}.py')!r})"
+             "['VARIANTS']))"], cwd=ROOT, capture_output=True, text=True, check=True,
+        ).stdout.split()  # fmt: skip
+        for variant in names:
+            folder = tmp_path / f"{chapter}-{variant}"
+            folder.mkdir()
+            # the variants' own import of the reference becomes an import of the student's module itself
+            (folder / f"_right_{chapter}.py").write_text(variants_text.replace("from solutions.", "from "))
+            swap = f"\nimport _right_{chapter}\n\nglobals().update(_right_{chapter}.VARIANTS[{variant!r}])\n"
+            (folder / f"{chapter}.py").write_text((ROOT / "solutions" / f"{chapter}.py").read_text() + swap)
+            collected, results, note = grade.run_tests(str(folder), [test_file], limit_s=600)
+            assert not note and collected, (chapter, variant, note)
+            graded += 1
+            rejected += [f"{chapter}:{variant}: {r.nodeid}: {r.message}" for r in results if r.outcome != "passed"]
+    assert graded >= 20 and not rejected, "\n".join(rejected[:10])
+
+
+def test_one_exercise_may_import_another_as_in_the_repository(tmp_path):
+    make_folder(tmp_path, "def f(x):\n    return 2 * x\n")
+    make_folder(tmp_path, "from exercises.ch05_clipping import f\n\ndef g(x):\n    return f(x) + 1\n", "ch06_the_min")
+    box = sandbox.Sandbox(tmp_path)
+    try:
+        assert box.load("ch06_the_min") is None
+        assert box.call("ch06_the_min", "g", (3,), {}) == 7
     finally:
         box.close()

@@ -11,8 +11,8 @@ The implementation is chosen by the environment variable MINIPPO_IMPL:
 
 A student's code (``exercises`` or a folder) never runs in this process: ``load_student`` starts a worker process
 for it (minippo.sandbox), and RemoteStudent sends each call there and brings back only the result, so the tests, their
-verdict and the grader's log stay out of its reach. The reference and the variants, the course's own code, run here
-unless MINIPPO_GRADE_ISOLATION=worker (``none`` runs everything here, as for debugging the tests).
+verdict and the grader's log stay out of its reach. The course's own code runs here: the variants always, the
+reference unless MINIPPO_GRADE_ISOLATION=worker (``none`` runs a student's code here too, to debug the tests).
 
 Test modules import the ``student`` fixture and ``pytest_generate_tests`` from here. (A conftest.py in this folder
 would take the module name ``conftest`` from tests/conftest.py, which other tests import helpers from.)
