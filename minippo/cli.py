@@ -220,6 +220,8 @@ def cmd_grade(args) -> int:
     if args.class_folder is not None:
         if args.solutions:
             raise MinippoError("--class grades the students' folders; leave out --solutions")
+        if args.submission is not None or args.gradescope is not None:
+            raise MinippoError("--class grades a whole class into --csv; --submission and --gradescope grade one")
         return grade_class(args.class_folder, args.chapter, csv_path=args.csv)
     if args.csv is not None:
         raise MinippoError("--csv goes with --class FOLDER (a folder of student folders)")
