@@ -50,6 +50,8 @@ LOG_VARIABLE = "MINIPPO_GRADE_LOG"
 STOP_VARIABLE = "MINIPPO_GRADE_STOP_AT_FIRST_FAILURE"
 KEY_VARIABLE = "MINIPPO_GRADE_KEY"  # signs every record of the log, so that a record the tests did not write is ignored
 HIDE_VARIABLE = "MINIPPO_GRADE_HIDE"
+TIME_FACTOR_VARIABLE = "MINIPPO_GRADE_TIME_FACTOR"
+WORKER_TIME_FACTOR = 2  # the per-test time limits, for code graded through a worker process
 RUN_LIMIT_S = 1800  # the whole run; each test has its own, much shorter limit
 RESTARTS = 5  # how many times a run whose test process died goes on with the tests that had not run
 # the book's chapter names, so "minippo grade the-min" works as well as "minippo grade 6"; book_names() adds any
@@ -150,6 +152,20 @@ def log_integrity(chapter: str, note: str | None, isolation: str | None = None) 
     _log({"integrity": chapter, "note": note, "isolation": isolation})
 
 
+def pytest_collection_modifyitems(items) -> None:
+    """Under MINIPPO_GRADE_TIME_FACTOR, every test's time limit times that factor: a student's code runs in a worker
+    process, and each of its calls costs a round trip there and back (a test may make a thousand)."""
+    factor = float(os.environ.get(TIME_FACTOR_VARIABLE) or 1)
+    if factor == 1:
+        return
+    import pytest
+
+    for item in items:
+        marker = item.get_closest_marker("timeout")
+        if marker is not None and marker.args:
+            item.add_marker(pytest.mark.timeout(float(marker.args[0]) * factor))
+
+
 def pytest_collection_finish(session) -> None:
     _log({"collected": [item.nodeid for item in session.items]})
 
@@ -237,6 +253,8 @@ def run_tests(
     env[KEY_VARIABLE] = key
     if hide:
         env[HIDE_VARIABLE] = os.pathsep.join(str(p) for p in hide)
+    if impl not in ("solutions", "wrong", "right") and not env.get(TIME_FACTOR_VARIABLE):
+        env[TIME_FACTOR_VARIABLE] = str(WORKER_TIME_FACTOR)
     integrity = integrity if integrity is not None else {}
     collected, results, note = [], {}, ""
     targets = [str(f) for f in files]
