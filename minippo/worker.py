@@ -260,6 +260,10 @@ class Worker:
         if header.get("op") == "answer_error":
             raise _exception(header.get("type", ""), header.get("message", ""))
         result = unpack(header.get("value"), blobs, self.resolve)
+        changed = unpack(header.get("changed"), blobs, self.resolve) or []
+        for given, after in zip(arrays_in((list(args), kwargs or {})), changed):
+            if isinstance(after, np.ndarray) and given.shape == after.shape and given.flags.writeable:
+                given[...] = after  # what the judge's method did to the array in place
         if request["kind"] == "getattr" and isinstance(result, np.ndarray):
             key = (request["ref"], request["name"])
             mirror = self.mirrors.get(key)
