@@ -248,15 +248,25 @@ def sweep_file_words(line: str) -> list[str]:
 
 
 def cmd_grade(args) -> int:
-    from minippo.grade import grade, grade_class
+    from minippo.grade import autograder_zip, grade, grade_class
 
     if args.class_folder is not None:
         if args.solutions:
             raise MinippoError("--class grades the students' folders; leave out --solutions")
+        if args.submission is not None or args.gradescope is not None:
+            raise MinippoError("--class grades a whole class into --csv; --submission and --gradescope grade one")
         return grade_class(args.class_folder, args.chapter, csv_path=args.csv)
     if args.csv is not None:
         raise MinippoError("--csv goes with --class FOLDER (a folder of student folders)")
-    return grade(args.chapter, solutions=args.solutions, verbose=args.verbose)
+    if args.autograder_zip is not None:
+        if not (args.repo and args.commit):
+            raise MinippoError("--autograder-zip needs --repo URL and --commit SHA (where setup.sh installs minippo)")
+        return autograder_zip(args.autograder_zip, args.repo, args.commit, args.chapter)
+    if args.submission is not None and args.solutions:
+        raise MinippoError("--submission grades that folder; leave out --solutions")
+    return grade(
+        args.chapter, solutions=args.solutions, impl=args.submission, verbose=args.verbose, gradescope=args.gradescope
+    )
 
 
 def build_parser() -> Parser:
@@ -331,6 +341,15 @@ def build_parser() -> Parser:
     p.add_argument("--class", dest="class_folder", metavar="FOLDER",
                    help="grade a class: FOLDER holds one folder of chNN_*.py modules per student")  # fmt: skip
     p.add_argument("--csv", metavar="FILE", help="with --class: write one row per student and chapter to FILE")
+    p.add_argument("--submission", metavar="FOLDER", help="grade the chNN_*.py modules in FOLDER (one student's)")
+    p.add_argument("--gradescope", metavar="FILE", help="also write the results to FILE in Gradescope's format")
+    p.add_argument(
+        "--autograder-zip",
+        metavar="ZIP",
+        help="write Gradescope's autograder zip (setup.sh, run_autograder) to ZIP; needs --repo, --commit",
+    )
+    p.add_argument("--repo", help="with --autograder-zip: the course repository's address, for setup.sh")
+    p.add_argument("--commit", help="with --autograder-zip: the commit setup.sh installs")
     p.set_defaults(func=cmd_grade)
     return parser
 

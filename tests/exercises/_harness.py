@@ -9,6 +9,11 @@ The implementation is chosen by the environment variable MINIPPO_IMPL:
   the tests accept any correct implementation, not only the reference's way;
 - a folder path: a folder holding chNN_*.py modules with the same functions (a copy of exercises/ elsewhere).
 
+A student's code (``exercises`` or a folder) never runs in this process: ``load_student`` starts a worker process
+for it (minippo.sandbox), and RemoteStudent sends each call there and brings back only the result, so the tests, their
+verdict and the grader's log stay out of its reach. The course's own code runs here: the variants always, the
+reference unless MINIPPO_GRADE_ISOLATION=worker (``none`` runs a student's code here too, to debug the tests).
+
 Test modules import the ``student`` fixture and ``pytest_generate_tests`` from here. (A conftest.py in this folder
 would take the module name ``conftest`` from tests/conftest.py, which other tests import helpers from.)
 """
@@ -33,6 +38,8 @@ from minippo.gradcheck import central_differences
 
 ROOT = Path(__file__).resolve().parents[2]
 IMPL_VARIABLE = "MINIPPO_IMPL"
+ISOLATION_VARIABLE = "MINIPPO_GRADE_ISOLATION"
+HIDE_VARIABLE = "MINIPPO_GRADE_HIDE"  # more folders the worker must not see (the class folder), os.pathsep-separated
 if str(ROOT) not in sys.path:  # exercises/ and solutions/ are packages at the repository root
     sys.path.insert(0, str(ROOT))
 
@@ -205,6 +212,13 @@ def _load(chapter: str, impl: str, variant: str | None):
         where = str(path)
     if not path.exists():
         return Broken(where, "there is no such file")
+    if isolated(impl):
+        try:
+            return _load_isolated(chapter, path.parent, where)
+        except KeyboardInterrupt:
+            raise
+        except BaseException as error:  # noqa: BLE001 - a time-out while the worker imports the module
+            return Broken(where, _describe(error))
     try:
         if impl in ("solutions", "exercises"):
             module = importlib.import_module(f"{impl}.{chapter}")
@@ -215,6 +229,108 @@ def _load(chapter: str, impl: str, variant: str | None):
     except BaseException as error:  # noqa: BLE001 - a syntax error, sys.exit or a time-out while importing
         return Broken(where, _describe(error))
     return Student(module, where)
+
+
+class RemoteStudent:
+    """The module under test, loaded in a worker process: each call sends its arguments there and brings back the
+    result (and the arguments' in-place changes). Errors read as Student's do: the call with its input shapes, the
+    line of the student's code, a hint."""
+
+    def __init__(self, sandbox, chapter: str, where: str):
+        self._sandbox, self._chapter, self._where = sandbox, chapter, where
+
+    def _report(self) -> None:
+        """Pass the worker's new integrity notes to the grader's log, as notes of this chapter."""
+        from minippo.grade import log_integrity
+        from minippo.sandbox import answer_note
+
+        for note in self._sandbox.take_notes():
+            note = answer_note(note, self._chapter)
+            if note:
+                log_integrity(self._chapter, note)
+
+    def _ready(self):
+        """The sandbox with this module loaded (again, after a time limit or a crash ended the last worker)."""
+        if not self._sandbox.loaded(self._chapter):
+            try:
+                error = self._sandbox.load(self._chapter)
+            finally:
+                self._report()
+            if error:
+                pytest.fail(f"{self._where} could not be imported: {error}", pytrace=False)
+        return self._sandbox
+
+    def __getattr__(self, name):
+        if name.startswith("__"):
+            raise AttributeError(name)
+        from minippo.sandbox import StudentRaised, WorkerDied
+
+        try:
+            sandbox = self._ready()
+        except WorkerDied as error:
+            raise StudentError(str(error)) from None
+        if name not in sandbox.functions[self._chapter]:
+            try:
+                return sandbox.get(self._chapter, name)
+            except AttributeError:
+                pytest.fail(f"{self._where} has no function {name}: keep the names of the exercise", pytrace=False)
+            except WorkerDied as error:
+                raise StudentError(str(error)) from None
+
+        def call(*args, **kwargs):
+            try:
+                return self._ready().call(self._chapter, name, args, kwargs)
+            except StudentRaised as error:
+                if error.not_implemented:
+                    raise StudentError(f"{name} is not written yet (it raises NotImplementedError)") from None
+                what = str(error)
+                raise StudentError(f"{describe_call(call, name, args, kwargs)} raised {what}{error.line}{_hint(what)}")
+            except WorkerDied as error:
+                raise StudentError(str(error)) from None
+            finally:
+                self._report()
+
+        call.__name__ = call.__qualname__ = name
+        signature = sandbox.signature(self._chapter, name)
+        if signature is not None:
+            call.__signature__ = signature
+        return call
+
+
+def isolated(impl: str) -> bool:
+    """Whether ``impl`` is graded through a worker process: a student's code always is, the course's own on request."""
+    chosen = os.environ.get(ISOLATION_VARIABLE, "").strip()
+    if chosen == "none":
+        return False
+    return chosen == "worker" or impl not in ("solutions", *VARIANT_FOLDERS)
+
+
+_sandboxes: dict[Path, object] = {}  # one worker per student folder, for all its chapters
+
+
+def _load_isolated(chapter: str, folder: Path, where: str):
+    from minippo.grade import LOG_VARIABLE, log_integrity
+    from minippo.sandbox import Sandbox, WorkerDied, scan_source
+
+    if folder not in _sandboxes:
+        hide = [p for p in os.environ.get(HIDE_VARIABLE, "").split(os.pathsep) if p]
+        if os.environ.get(LOG_VARIABLE):
+            hide.append(str(Path(os.environ[LOG_VARIABLE]).parent))
+        _sandboxes[folder] = Sandbox(folder, hide=hide)
+    sandbox = _sandboxes[folder]
+    log_integrity(chapter, None, isolation=sandbox.isolation)
+    for path in [folder / f"{chapter}.py", *sorted(folder.glob("*.py"))]:
+        if path.name == f"{chapter}.py" or not path.name.startswith("ch"):
+            for note in scan_source(path, chapter):
+                log_integrity(chapter, f"{path.name} {note}")
+    student = RemoteStudent(sandbox, chapter, where)
+    try:
+        error = sandbox.load(chapter)
+    except WorkerDied as died:
+        error = str(died)
+    finally:
+        student._report()
+    return Broken(where, error) if error else student
 
 
 def pytest_generate_tests(metafunc):

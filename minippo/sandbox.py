@@ -1,0 +1,614 @@
+"""The judge's side of grading a student's module in a worker process (minippo/worker.py).
+
+``Sandbox(folder, chapter)`` copies the student's folder and minippo into a private temporary folder and starts
+``python -I worker.py`` there, with the process limits below (CPU seconds, address space, file size, processes) and,
+where Linux namespaces are available (``unshare`` as root), its own mount and PID namespaces in which the course's
+repository, the class folder and the grader's files are covered by empty file systems and every capability is
+dropped. ``call(name, args, kwargs)`` runs one of the module's functions there and returns its result; the tests that
+judge it, their verdict and the grader's log never leave this process.
+
+What the worker may reach of the judge's objects (an agent, an optimizer, a config) is listed in EXPOSED: the named
+attributes and methods, nothing that starts with ``_``. Arrays it reads from them are mirrored: a change it makes in
+place (``agent.grads *= s``) is written back here before the judge acts on its next request, and a change made here
+(``agent.backward`` writing ``agent.grads``) is sent to it with every answer.
+"""
+
+from __future__ import annotations
+
+import ast
+import atexit
+import functools
+import inspect
+import os
+import select
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from minippo.worker import WireError, arrays_in, pack, read_frame, unpack, write_frame
+
+PACKAGE = Path(__file__).resolve().parent
+ROOT = PACKAGE.parent
+LIMITS = {
+    "cpu_s": 900,  # the whole worker (one chapter), far above what the per-test time limits allow
+    "memory_bytes": 4 << 30,  # address space
+    "file_bytes": 16 << 20,  # the largest file it may write
+    "processes": 0 if os.getuid() != 0 else None,  # no new process or thread (root is exempt from this limit)
+    "core_bytes": 0,
+}
+STUDENT_FOLDER_BYTES = 20 << 20  # a student's folder larger than this is not copied whole
+MAX_NOTES = 50
+
+# the judge's objects the worker may use, by class name: the attributes and methods it may read or call ("*": every
+# attribute that is not callable, as for a config); anything else crosses as a handle it can only pass back
+EXPOSED = {
+    "ActorCritic": {"forward", "backward", "distribution", "policy_output", "value", "params", "grads", "log_std",
+                    "grad_log_std", "kind", "obs_dim", "act_dim", "hidden_sizes", "shared", "nets"},
+    "MLP": {"forward", "backward", "W", "b", "grad_W", "grad_b", "params", "grads", "sizes"},
+    "Categorical": {"logits", "log_probs", "probs", "log_prob", "log_prob_backward", "entropy", "entropy_backward",
+                    "kl", "kl_backward", "mode"},
+    "DiagGaussian": {"mean", "log_std", "std", "log_prob", "log_prob_backward", "entropy", "entropy_backward", "kl",
+                     "kl_backward", "mode"},
+    "Adam": {"step", "lr", "params", "m", "v", "t", "beta1", "beta2", "eps", "bias_correction"},
+    "RecordingSGD": {"step", "lr", "params", "received"},
+    "Generator": {"permutation", "shuffle", "integers", "random", "normal", "uniform", "choice", "standard_normal"},
+    "Config": "*",
+}  # fmt: skip
+
+# the minippo functions and classes that are themselves the answer to a chapter's exercises: a submission may use
+# them (it runs), but the grade says so
+LIBRARY_ANSWERS = {
+    "ch01_network": {"minippo.network": ["linear_backward", "tanh_backward", "MLP"], "minippo.optimizer": ["Adam"]},
+    "ch02_distributions": {"minippo.distributions": ["Categorical", "DiagGaussian"]},
+    "ch03_vanilla_pg": {"minippo.losses": ["pg_objective"]},
+    "ch04_cpi": {"minippo.losses": ["cpi_objective"]},
+    "ch05_clipping": {"minippo.losses": ["clip_objective", "clip_fraction"]},
+    "ch06_the_min": {"minippo.losses": ["clip_objective"]},
+    "ch07_advantages": {"minippo.advantages": ["discounted_returns", "td_residuals", "gae"]},
+    "ch08_shared_network": {"minippo.losses": ["value_loss"]},
+    "ch09_kl_penalty": {"minippo.losses": ["kl_penalty_objective", "adaptive_beta"],
+                        "minippo.distributions": ["Categorical"]},
+    "ch10_ppo_update": {"minippo.ppo": ["loss_and_grad", "update_minibatch", "Trainer", "train"]},
+    "ch12_language_model": {"minippo.reward_model": ["bradley_terry_loss", "RewardModel"],
+                            "minippo.rlhf": ["kl_shaped_rewards", "train_rlhf"]},
+}  # fmt: skip
+# what no submission needs: the reference, the tests, the grader
+FORBIDDEN_IMPORTS = ("solutions", "_harness", "pytest", "_pytest", "minippo.grade", "minippo.sandbox",
+                     "minippo.worker", "tests")  # fmt: skip
+
+
+class StudentRaised(Exception):
+    """The student's function raised; ``kind`` and ``text`` say what, ``line`` where in their code."""
+
+    def __init__(self, kind: str, text: str, line: str, not_implemented: bool):
+        super().__init__(f"{kind}: {text}".rstrip(": "))
+        self.kind, self.text, self.line, self.not_implemented = kind, text, line, not_implemented
+
+
+class WorkerDied(Exception):
+    """The worker ended (or broke the protocol) during a call."""
+
+
+class StudentObject:
+    """Stands in for an object of the student's that stays in the worker (it can only be passed back)."""
+
+    def __init__(self, ref: int, text: str):
+        self._ref, self._text = ref, text
+
+    def __repr__(self):
+        return self._text
+
+
+@functools.cache
+def _stand_in_class(name: str) -> type:
+    """A class named as the student's, so that a message reads 'not Foo' as it would have in one process."""
+    return type(name if name.isidentifier() else "object", (StudentObject,), {})
+
+
+@functools.cache
+def namespaces_available() -> bool:
+    """Whether this machine lets the grader give each worker its own mount and PID namespaces (root and unshare)."""
+    if os.getuid() != 0 or not (shutil.which("unshare") and shutil.which("setpriv")):
+        return False
+    try:
+        probe = subprocess.run(
+            ["unshare", "--mount", "--pid", "--fork", "--kill-child", "--mount-proc", "sh", "-c",
+             "mount -t tmpfs none /mnt && exec setpriv --bounding-set=-all --inh-caps=-all --no-new-privs true"],
+            capture_output=True, timeout=20,
+        )  # fmt: skip
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+    return probe.returncode == 0
+
+
+def isolation() -> str:
+    """The words for the CSV: how far a worker is kept from the grader."""
+    if os.environ.get("MINIPPO_GRADE_NO_NAMESPACES") or not namespaces_available():
+        return "process"
+    return "namespaces"
+
+
+# the mounts, in the worker's own namespaces: each folder to hide gets an empty read-only file system over it
+HIDE_SCRIPT = """
+n=$1; shift
+while [ "$n" -gt 0 ]; do
+    mount -t tmpfs -o ro,size=4k,mode=0555 minippo-hidden "$1" || exit 97
+    shift; n=$((n - 1))
+done
+setpriv --bounding-set=-all --inh-caps=-all --no-new-privs "$@"
+exit $?
+"""  # not exec: the shell stays as the namespace's first process and says how the worker ended (128 + a signal)
+
+
+def _copy_folder(source: Path, target: Path) -> None:
+    """The student's regular files (no links, which could point at someone else's), up to STUDENT_FOLDER_BYTES."""
+    target.mkdir(parents=True)
+    total = 0
+    for path in sorted(source.rglob("*")):
+        relative = path.relative_to(source)
+        if any(part.startswith(".") or part == "__pycache__" for part in relative.parts) or path.is_symlink():
+            continue
+        if path.is_dir():
+            (target / relative).mkdir(parents=True, exist_ok=True)
+        elif path.is_file():
+            total += path.stat().st_size
+            if total > STUDENT_FOLDER_BYTES:
+                break
+            (target / relative).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(path, target / relative)
+
+
+class Sandbox:
+    """One student's folder: its chapter modules loaded in one worker process, which is started again (and loads
+    each module again when first used) after it dies."""
+
+    def __init__(self, folder: Path, hide=(), limits: dict | None = None):
+        self.folder = Path(folder)
+        self.limits = dict(LIMITS, **(limits or {}))
+        self.hide = [Path(p) for p in (ROOT, *hide)]
+        self.isolation = isolation()
+        self.notes: list[str] = []  # what the worker reported, in order; take_notes() hands out the new ones
+        self._taken = 0
+        self.functions: dict[str, dict[str, list | None]] = {}  # {module: {function: its parameters}}
+        self.process = None
+        self.workdir = None
+        self._read = self._write = None
+        self._objects: dict[int, object] = {}
+        self._callable: set[int] = set()
+        self._mirrored: dict[tuple[int, str], np.ndarray] = {}
+        self._fresh = False
+        _ALL.append(self)
+
+    # the process
+    def start(self) -> None:
+        """Start a worker (raises WorkerDied if it cannot even begin)."""
+        self.close()
+        self.functions = {}
+        self.workdir = Path(tempfile.mkdtemp(prefix="minippo-worker-"))
+        student, lib, run = self.workdir / "student", self.workdir / "lib", self.workdir / "run"
+        _copy_folder(self.folder, student)
+        shutil.copytree(PACKAGE, lib / "minippo", ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+        # ``from exercises.ch06_the_min import ...`` (one exercise using another, as in the repository) finds the
+        # student's own modules
+        (lib / "exercises").mkdir()
+        (lib / "exercises" / "__init__.py").write_text(f"__path__ = [{str(student)!r}]\n", encoding="utf-8")
+        run.mkdir()
+        from_judge, to_worker = os.pipe()  # (read end, write end)
+        from_worker, to_judge = os.pipe()
+        command = [sys.executable, "-I", str(lib / "minippo" / "worker.py"), str(from_judge), str(to_judge)]
+        hidden = [str(p) for p in self._hidden()]
+        if self.isolation == "namespaces":
+            command = ["unshare", "--mount", "--pid", "--fork", "--kill-child", "--mount-proc", "sh", "-c",
+                       HIDE_SCRIPT, "sh", str(len(hidden)), *hidden, *command]  # fmt: skip
+        elif os.getuid() == 0 and shutil.which("setpriv"):
+            # root without its capabilities: it cannot read another process's memory or environment
+            command = ["setpriv", "--bounding-set=-all", "--inh-caps=-all", "--no-new-privs", *command]
+        env = {"PATH": os.environ.get("PATH", os.defpath), "HOME": str(run), "LANG": "C.UTF-8", "TMPDIR": str(run),
+               "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}  # fmt: skip
+        try:
+            self.process = subprocess.Popen(
+                command, cwd=run, env=env, pass_fds=(from_judge, to_judge), stdin=subprocess.DEVNULL,
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+            )  # fmt: skip
+        finally:
+            os.close(from_judge)
+            os.close(to_judge)
+        self._write, self._read = to_worker, from_worker
+        forbidden = [str(p) for p in self.hide]
+        # minippo itself loads native libraries (threadpoolctl) that the worker's guard refuses once the student's
+        # code runs: a submission that mentions minippo gets it imported first
+        mentions = any("minippo" in p.read_text(errors="replace") for p in student.rglob("*.py"))
+        start = {
+            "path": [str(student), str(lib)],
+            "forbidden": forbidden,
+            "limits": self.limits,
+            "answers": _all_answers(),
+            "preload": ["minippo"] if mentions else [],
+        }
+        try:
+            write_frame(self._write, start)
+        except OSError:
+            self.close()
+            raise WorkerDied("the process that runs the code could not be started") from None
+
+    def load(self, chapter: str) -> str | None:
+        """Import the student's ``chapter`` module in the worker (starting one if needed); the import's error in
+        words, or None."""
+        if not self.alive():
+            self.start()
+        try:
+            path = self.workdir / "student" / f"{chapter}.py"
+            self._send({"op": "load", "module": chapter, "path": str(path)})
+            header, _ = self._receive(("loaded",))
+        except BaseException:
+            self.close()
+            raise
+        if header.get("error"):
+            return str(header["error"])
+        self.functions[chapter] = header.get("functions") or {}
+        return None
+
+    def loaded(self, chapter: str) -> bool:
+        return self.alive() and chapter in self.functions
+
+    def take_notes(self) -> list[str]:
+        new = self.notes[self._taken :]
+        self._taken = len(self.notes)
+        return new
+
+    def _hidden(self) -> list[Path]:
+        """The folders to cover in the worker's mount namespace: those that exist and do not hold the worker's own."""
+        found = []
+        for path in self.hide:
+            real = Path(os.path.realpath(path))
+            if real.is_dir() and real != Path("/") and real not in found:
+                if not (self.workdir == real or real in self.workdir.parents):
+                    found.append(real)
+        return found
+
+    def alive(self) -> bool:
+        return self.process is not None and self.process.poll() is None
+
+    def close(self) -> None:
+        if self.process is not None:
+            if self.process.poll() is None:
+                try:
+                    os.killpg(self.process.pid, signal.SIGKILL)
+                except (ProcessLookupError, PermissionError):
+                    pass
+            try:
+                self.process.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                pass
+            self.process = None
+        for fd in (self._write, self._read):
+            if fd is not None:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+        self._read = self._write = None
+        if self.workdir is not None:
+            shutil.rmtree(self.workdir, ignore_errors=True)
+            self.workdir = None
+
+    def _death(self) -> str:
+        process = self.process
+        try:
+            code = process.wait(timeout=5) if process is not None else None
+        except subprocess.TimeoutExpired:
+            code = None
+        self.close()
+        if code is None:
+            return "the process running it stopped answering"
+        if code < 0:
+            return self._death_by_signal(code)
+        if code == 97:
+            return "the grader could not hide the course's files from it"
+        if self.isolation == "namespaces" and 128 < code < 128 + 65:
+            code = 128 - code  # the shell's way of saying "killed by signal code - 128"
+            return self._death_by_signal(code)
+        return f"it exited with code {code}: does the code call sys.exit or os._exit?"
+
+    @staticmethod
+    def _death_by_signal(code: int) -> str:
+        try:
+            name = signal.Signals(-code).name
+            return f"killed by signal {name}" + (": it used up its CPU time" if name == "SIGXCPU" else "")
+        except ValueError:
+            return f"killed by signal {-code}"
+
+    # talking to the worker
+    def _send(self, header: dict, **values) -> None:
+        blobs: list = []
+        for name, value in values.items():
+            header[name] = pack(value, self._refer, blobs)
+        if self._fresh:
+            header["fresh"], self._fresh = True, False
+        header["updates"] = self._updates(blobs)
+        write_frame(self._write, header, blobs)
+
+    def _receive(self, ends: tuple) -> tuple[dict, list]:
+        """Read frames (answering the worker's questions about the judge's objects) until one whose op is in
+        ``ends``; raises WorkerDied if the worker ends or breaks the protocol."""
+        while True:
+            try:
+                if self._read is None:
+                    raise EOFError
+                select.select([self._read], [], [])
+                header, blobs = read_frame(self._read)
+            except (EOFError, OSError, WireError, ValueError) as error:
+                reason = self._death()
+                if isinstance(error, WireError):
+                    reason = f"it broke the grader's protocol ({error})"
+                raise WorkerDied(f"the test process died while running it ({reason})") from None
+            op = header.get("op")
+            if op == "note":
+                text = str(header.get("text", ""))[:300]
+                if text not in self.notes and len(self.notes) < MAX_NOTES:
+                    self.notes.append(text)
+                continue
+            try:
+                self._apply_pushes(header.get("pushes") or [], blobs)
+            except (WireError, ValueError, TypeError, KeyError) as error:
+                self.close()
+                raise WorkerDied(f"the test process died while running it (it broke the grader's protocol: {error})")
+            if op in ends:
+                return header, blobs
+            if op == "ask":
+                self._answer(header, blobs)
+                continue
+            self.close()
+            raise WorkerDied("the test process died while running it (it broke the grader's protocol)")
+
+    # the judge's objects, as the worker sees them
+    def _refer(self, value):
+        if isinstance(value, StudentObject):
+            return {"$w": value._ref}
+        ref = id(value)
+        self._objects[ref] = value
+        return {"$j": ref}
+
+    def _resolve(self, node):
+        if "$w" in node:
+            return _stand_in_class(str(node.get("type", "object")))(node["$w"], str(node.get("repr", ""))[:200])
+        if "$j" in node and node["$j"] in self._objects:
+            return self._objects[node["$j"]]
+        raise WireError("a reference to an object the grader does not know")
+
+    def _allowed(self, value, name: str) -> bool:
+        if name.startswith("_"):
+            return False
+        allowed = EXPOSED.get(type(value).__name__)
+        if allowed == "*":
+            return not callable(getattr(value, name, None))
+        return allowed is not None and name in allowed
+
+    def _answer(self, header: dict, blobs: list) -> None:
+        try:
+            ref, kind = header.get("ref"), header.get("kind")
+            if ref not in self._objects:
+                raise AttributeError("that object of the grader's is no longer there")
+            target = self._objects[ref]
+            if kind in ("getattr", "setattr"):
+                name = str(header.get("name"))
+                if not self._allowed(target, name):
+                    raise AttributeError(f"the grader's {type(target).__name__} does not offer {name} to graded code")
+                if kind == "setattr":  # only an array for an array (agent.params = new values, say)
+                    value = unpack(header.get("value"), blobs, self._resolve)
+                    if not (isinstance(getattr(target, name, None), np.ndarray) and isinstance(value, np.ndarray)):
+                        raise AttributeError(f"graded code may not set {name} of the grader's {type(target).__name__}")
+                    setattr(target, name, value)
+                    self._mirrored.pop((ref, name), None)
+                value = getattr(target, name)
+                if isinstance(value, np.ndarray):
+                    self._mirrored[(ref, name)] = value.copy()
+                elif callable(value) and not isinstance(value, type):
+                    self._callable.add(id(value))
+            elif kind == "call":
+                if ref not in self._callable:
+                    raise TypeError("that object of the grader's cannot be called")
+                args = unpack(header.get("args"), blobs, self._resolve)
+                kwargs = unpack(header.get("kwargs"), blobs, self._resolve)
+                if not isinstance(args, list) or not isinstance(kwargs, dict):
+                    raise TypeError("bad arguments")
+                value = target(*args, **{str(k): v for k, v in kwargs.items()})
+                # the arguments as the method left them (rng.shuffle(order) works in place), for the worker's copies
+                self._send({"op": "answer"}, value=value, changed=list(arrays_in((args, kwargs))))
+                return
+            else:
+                raise TypeError("a question the grader does not answer")
+        except Exception as error:  # noqa: BLE001 - the error goes back to the student's code, which may handle it
+            self._send({"op": "answer_error", "type": type(error).__name__, "message": str(error)})
+            return
+        self._send({"op": "answer"}, value=value)
+
+    def _updates(self, blobs: list) -> list:
+        """The mirrored arrays that changed here since the worker last saw them."""
+        changed = []
+        for (ref, name), seen in self._mirrored.items():
+            current = getattr(self._objects[ref], name, None)
+            if not isinstance(current, np.ndarray):
+                continue
+            if current.shape != seen.shape or not np.array_equal(current, seen, equal_nan=current.dtype.kind in "fc"):
+                changed.append([ref, name, pack(current, self._refer, blobs)])
+                self._mirrored[(ref, name)] = current.copy()
+        return changed
+
+    def _apply_pushes(self, pushes: list, blobs: list) -> None:
+        """Write the worker's in-place changes of mirrored arrays into the judge's own arrays."""
+        for ref, name, node in pushes:
+            if (ref, name) not in self._mirrored:
+                continue
+            value = unpack(node, blobs, self._resolve)
+            current = getattr(self._objects[ref], name, None)
+            if (
+                isinstance(current, np.ndarray)
+                and isinstance(value, np.ndarray)
+                and current.shape == value.shape
+                and current.flags.writeable
+            ):
+                current[...] = value
+                self._mirrored[(ref, name)] = current.copy()
+
+    # what the tests use
+    def call(self, chapter: str, name: str, args: tuple, kwargs: dict):
+        """Call the student's ``name`` with these arguments; its result, with every array argument it changed in place
+        changed here too. Raises StudentRaised, or WorkerDied (after which the next call starts a new worker)."""
+        self._objects.clear()
+        self._callable.clear()
+        self._mirrored.clear()
+        self._fresh = True
+        try:
+            self._send({"op": "call", "module": chapter, "name": name}, args=list(args), kwargs=dict(kwargs))
+            header, blobs = self._receive(("done", "raised"))
+            inputs = list(arrays_in((list(args), kwargs)))
+            changed = unpack(header.get("changed", []), blobs, self._resolve) or []
+            for k, value in changed:
+                target = inputs[int(k)] if 0 <= int(k) < len(inputs) else None
+                if target is not None and target.shape == value.shape and target.flags.writeable:
+                    target[...] = value
+            if header["op"] == "raised":
+                raise StudentRaised(
+                    str(header.get("type", "Exception")),
+                    str(header.get("message", "")),
+                    str(header.get("line", "")),
+                    bool(header.get("not_implemented")),
+                )
+            result = unpack(header.get("value"), blobs, self._resolve)
+            aliases = {int(i): inputs[int(k)] for i, k in header.get("aliases", []) if 0 <= int(k) < len(inputs)}
+            return _swap_arrays(result, aliases) if aliases else result
+        except (StudentRaised, WorkerDied):
+            raise
+        except (WireError, ValueError, TypeError, KeyError, IndexError) as error:
+            self.close()
+            raise WorkerDied(f"the test process died while running it (it broke the grader's protocol: {error})")
+        except BaseException:  # a time limit (or anything else) in the middle of a call: that worker is done
+            self.close()
+            raise
+        finally:
+            self._objects.clear()
+            self._callable.clear()
+            self._mirrored.clear()
+
+    def get(self, chapter: str, name: str):
+        """A module attribute that is not a function (a constant); raises AttributeError when there is none."""
+        self._send({"op": "get", "module": chapter, "name": name})
+        header, blobs = self._receive(("value",))
+        if header.get("missing"):
+            raise AttributeError(name)
+        return unpack(header.get("value"), blobs, self._resolve)
+
+    def signature(self, chapter: str, name: str) -> inspect.Signature | None:
+        described = self.functions.get(chapter, {}).get(name)
+        if not described:
+            return None
+        try:
+            return inspect.Signature(
+                [
+                    inspect.Parameter(
+                        str(p), inspect._ParameterKind(int(kind)), default=None if has else inspect._empty
+                    )
+                    for p, kind, has in described
+                ]
+            )
+        except (ValueError, TypeError):
+            return None
+
+
+def _swap_arrays(value, aliases: dict, counter=None):
+    """``value`` with its i-th array (in arrays_in's order) replaced by aliases[i]: the judge's own input array (or a
+    view of it), where the student's function returned one of its inputs."""
+    counter = counter if counter is not None else [0]
+    if isinstance(value, np.ndarray):
+        if value.dtype.kind not in "biufc" or value.dtype.fields:
+            return value
+        i = counter[0]
+        counter[0] += 1
+        if i not in aliases:
+            return value
+        given = aliases[i]
+        if given.shape == value.shape and given.dtype == value.dtype:
+            return given
+        return given.reshape(-1)[: value.size].reshape(value.shape) if given.size >= value.size else value
+    if isinstance(value, tuple):
+        return tuple(_swap_arrays(item, aliases, counter) for item in value)
+    if isinstance(value, list):
+        return [_swap_arrays(item, aliases, counter) for item in value]
+    if isinstance(value, dict):
+        return {key: _swap_arrays(item, aliases, counter) for key, item in value.items()}
+    return value
+
+
+def _all_answers() -> dict[str, list[str]]:
+    merged: dict[str, set] = {}
+    for modules in LIBRARY_ANSWERS.values():
+        for module, names in modules.items():
+            merged.setdefault(module, set()).update(names)
+    return {module: sorted(names) for module, names in merged.items()}
+
+
+def answer_note(note: str, chapter: str) -> str | None:
+    """A worker's note as the chapter's integrity note: "calls minippo.x.f" only when f answers this chapter's
+    exercise (a later chapter may use an earlier one's from the library); other notes as they are."""
+    if not note.startswith("calls "):
+        return note
+    module, _, name = note[len("calls ") :].rpartition(".")
+    if name in LIBRARY_ANSWERS.get(chapter, {}).get(module, []):
+        return f"calls {module}.{name}, minippo's own version of the exercise"
+    return None
+
+
+_ALL: list[Sandbox] = []
+
+
+@atexit.register
+def _close_all() -> None:
+    for sandbox in _ALL:
+        sandbox.close()
+
+
+# what the submission's text says it uses, read here where the student's code cannot change the reading
+
+
+def scan_source(path: Path, chapter: str) -> list[str]:
+    """The integrity notes for one module: imports of the reference, the tests or the grader, and uses of minippo's
+    own version of the chapter's exercises. Empty when the text holds none of them."""
+    try:
+        tree = ast.parse(path.read_text(encoding="utf-8", errors="replace"))
+    except (OSError, SyntaxError, ValueError):
+        return []
+    answers = LIBRARY_ANSWERS.get(chapter, {})
+    notes, modules, names = [], set(), set()
+    for node in ast.walk(tree):
+        imported = []
+        if isinstance(node, ast.Import):
+            imported = [(alias.name, None) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+            imported = [(node.module, alias.name) for alias in node.names]
+        for module, name in imported:
+            full = f"{module}.{name}" if name else module
+            if any(full == f or full.startswith(f + ".") or module == f for f in FORBIDDEN_IMPORTS):
+                notes.append(f"imports {full}")
+            if name and module in answers and name in answers[module]:
+                notes.append(f"uses {module}.{name}, minippo's own version of the exercise")
+            if name and f"{module}.{name}" in answers:
+                modules.add(f"{module}.{name}")
+            if module in answers:
+                modules.add(module)
+        if isinstance(node, ast.Attribute):
+            names.add(node.attr)
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "__import__":
+            notes.append("imports modules by name (__import__)")
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "getattr":
+            names.update(a.value for a in node.args[1:2] if isinstance(a, ast.Constant) and isinstance(a.value, str))
+    for module in sorted(modules):
+        for name in answers[module]:
+            if name in names:
+                notes.append(f"uses {module}.{name}, minippo's own version of the exercise")
+    return list(dict.fromkeys(notes))

@@ -1,0 +1,458 @@
+"""Grading a class that cannot be cheated: submissions that import the reference, forge or delete the grader's log,
+patch the harness, pytest or NumPy's testing functions, exit early, fork, hog memory or the disk, or read another
+student's folder score no more than the untouched stubs, or are flagged in the integrity column; honest ones keep
+their full score. Also the CSV's cells, Gradescope's results.json and the autograder zip."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import subprocess
+import sys
+import textwrap
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from minippo import grade, sandbox
+
+ROOT = Path(__file__).resolve().parents[1]
+SOLUTION = (ROOT / "solutions" / "ch05_clipping.py").read_text(encoding="utf-8")
+STUB = (ROOT / "exercises" / "ch05_clipping.py").read_text(encoding="utf-8")
+# every cheat below keeps the stubs' functions, so the points can only come from the cheat
+CHEAT_TAIL = STUB.replace("from __future__ import annotations\n", "")
+
+# each: the code a submission runs on import, before the stubs (or in place of them)
+CHEATS = {
+    "imports_the_reference": "from solutions.ch05_clipping import *\n",
+    "puts_the_repository_on_its_path": f"import sys\nsys.path.insert(0, {str(ROOT)!r})\n"
+    "from solutions.ch05_clipping import *\n",
+    "reads_the_reference_and_runs_it": f"exec(open({str(ROOT / 'solutions' / 'ch05_clipping.py')!r}).read())\n",
+    "reads_another_student": "import glob\n"
+    "exec(open(sorted(glob.glob(__CLASS__ + '/honest*/ch05_clipping.py'))[0]).read())\n",
+    "forges_the_log": "import glob, json, os\n"
+    "for path in glob.glob('/tmp/minippo-grade-*/results-*.jsonl') + [os.environ.get('MINIPPO_GRADE_LOG', '')]:\n"
+    "    try:\n"
+    "        lines = open(path).read().splitlines()\n"
+    "        names = json.loads(json.loads(lines[0])['record'])['collected']\n"
+    "        with open(path, 'a') as handle:\n"
+    "            for name in names:\n"
+    "                record = json.dumps({'nodeid': name, 'outcome': 'passed', 'message': ''})\n"
+    "                handle.write(json.dumps({'record': record, 'mac': '0'}) + '\\n')\n"
+    "    except Exception:\n"
+    "        pass\n",
+    "deletes_the_log_and_exits": "import glob, os\n"
+    "for path in glob.glob('/tmp/minippo-grade-*/*'):\n"
+    "    try:\n"
+    "        os.remove(path)\n"
+    "    except OSError:\n"
+    "        pass\n"
+    "os._exit(0)\n",
+    "patches_the_checks": "import sys\n"
+    "import numpy.testing\n"
+    "numpy.testing.assert_allclose = lambda *a, **k: None\n"
+    "try:\n"
+    "    import _harness, pytest\n"
+    "    _harness.check_close = _harness.check_array = _harness.check_scalar = lambda *a, **k: a[0]\n"
+    "    pytest.fail = lambda *a, **k: None\n"
+    "except Exception:\n"
+    "    pass\n"
+    "for module in list(sys.modules.values()):\n"
+    "    if hasattr(module, 'check_close'):\n"
+    "        module.check_close = lambda *a, **k: None\n",
+    "forks": "import os, time\n"
+    "def clip_fraction(logp, logp_old, epsilon):\n"
+    "    for _ in range(32):  # bounded, in case the fork went through: 32 sleeping children\n"
+    "        if os.fork() == 0:\n"
+    "            time.sleep(60)\n"
+    "    return 0.0\n",
+    "starts_a_process": "import subprocess\n"
+    "def clip_fraction(logp, logp_old, epsilon):\n"
+    "    subprocess.run(['sh', '-c', 'cp -r /tmp/minippo-grade-* /tmp/stolen'])\n"
+    "    return 0.0\n",
+    "hogs_memory": "def clip_fraction(logp, logp_old, epsilon):\n"
+    "    hog = bytearray(16 << 30)\n"
+    "    return float(len(hog))\n",
+    "fills_the_disk": "def clip_fraction(logp, logp_old, epsilon):\n"
+    "    with open('filler', 'wb') as handle:\n"
+    "        for _ in range(64):\n"
+    "            handle.write(bytes(1 << 20))\n"
+    "    return 0.0\n",
+}
+STUB_SCORE = 0  # the stubs pass no test (tests/exercises/test_grading_catches_mistakes.py holds them to that)
+
+
+def write_class(folder: Path) -> None:
+    for name, code in CHEATS.items():
+        (folder / name).mkdir(parents=True)
+        code = code.replace("__CLASS__", repr(str(folder)))
+        # a cheat on import runs before the stubs; a cheating function replaces the stub's
+        text = CHEAT_TAIL + "\n" + code if "def clip_fraction" in code else code + "\n" + CHEAT_TAIL
+        (folder / name / "ch05_clipping.py").write_text(text, encoding="utf-8")
+    (folder / "honest").mkdir()
+    (folder / "honest" / "ch05_clipping.py").write_text(SOLUTION, encoding="utf-8")
+    (folder / "library").mkdir()
+    (folder / "library" / "ch05_clipping.py").write_text(
+        SOLUTION.replace("import numpy as np", "import numpy as np\nfrom minippo.losses import clip_fraction  # noqa")
+        .split("def clip_fraction")[0]
+        .rstrip()
+        + "\n",
+        encoding="utf-8",
+    )
+    (folder / "=HYPERLINK(1)").mkdir()
+    (folder / "=HYPERLINK(1)" / "ch05_clipping.py").write_text(STUB, encoding="utf-8")
+
+
+@pytest.fixture(scope="module")
+def graded(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("grading") / "class"
+    write_class(folder)
+    out = folder.parent / "grades.csv"
+    result = subprocess.run(
+        [sys.executable, "-m", "minippo", "grade", "5", "--class", str(folder), "--csv", str(out)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=900,
+        env={k: v for k, v in os.environ.items() if k != "MINIPPO_IMPL"},
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "Traceback" not in result.stdout + result.stderr
+    with open(out, newline="", encoding="utf-8") as handle:
+        rows = list(csv.DictReader(handle))
+    return {row["student"]: row for row in rows}, result.stdout
+
+
+@pytest.mark.timeout(900)
+@pytest.mark.parametrize("cheat", list(CHEATS))
+def test_a_cheat_scores_no_more_than_the_stubs_or_is_flagged(graded, cheat):
+    rows, _ = graded
+    row = rows[cheat]
+    assert int(row["total"]) > 0, row
+    assert int(row["passed"]) <= STUB_SCORE or row["integrity"], row
+
+
+@pytest.mark.timeout(900)
+def test_the_cheats_that_reach_for_the_answers_are_flagged(graded):
+    rows, _ = graded
+    for cheat in ("imports_the_reference", "puts_the_repository_on_its_path", "reads_the_reference_and_runs_it"):
+        assert rows[cheat]["integrity"], rows[cheat]
+    assert "minippo.losses.clip_fraction" in rows["library"]["integrity"], rows["library"]
+
+
+@pytest.mark.timeout(900)
+def test_honest_work_keeps_its_full_score_and_a_clean_line(graded):
+    rows, _ = graded
+    honest = rows["honest"]
+    assert honest["passed"] == honest["total"] != "0" and honest["first_failure"] == "", honest
+    assert honest["integrity"] == "" and honest["isolation"] in ("namespaces", "process"), honest
+    # the reference's own functions from the library pass too (it runs), but the line says so
+    assert int(rows["library"]["passed"]) > 0, rows["library"]
+
+
+@pytest.mark.timeout(900)
+def test_a_formula_in_a_folder_name_stays_text(graded):
+    rows, stdout = graded
+    assert "'=HYPERLINK(1)" in rows, sorted(rows)
+    assert all(not cell.startswith(("=", "+", "-", "@")) for row in rows.values() for cell in row.values())
+
+
+def test_csv_cells_are_one_line_and_never_formulas():
+    assert grade.csv_cell("=1+1") == "'=1+1"
+    assert (
+        grade.csv_cell("+cmd") == "'+cmd"
+        and grade.csv_cell("-2") == "'-2"
+        and grade.csv_cell("@SUM(A1)") == "'@SUM(A1)"
+    )
+    assert grade.csv_cell("two\nlines\r\n=x") == "two lines =x"
+    assert grade.csv_cell("clip_fraction: fine") == "clip_fraction: fine"
+
+
+# the worker itself: only data crosses, the judge's objects are reached through what EXPOSED allows
+
+
+def make_folder(tmp_path: Path, code: str, chapter: str = "ch05_clipping") -> Path:
+    (tmp_path / f"{chapter}.py").write_text(textwrap.dedent(code), encoding="utf-8")
+    return tmp_path
+
+
+def test_arrays_and_scalars_cross_with_their_dtype_and_in_place_changes_come_back(tmp_path):
+    folder = make_folder(
+        tmp_path,
+        """
+        import numpy as np
+
+        def f(x, y):
+            x *= 2
+            return x, np.float32(1.5), 3, (y, [y.astype(np.int8)])
+        """,
+    )
+    box = sandbox.Sandbox(folder)
+    try:
+        assert box.load("ch05_clipping") is None
+        x, y = np.arange(3.0), np.ones((2, 2))
+        same_x, scalar, integer, (same_y, (small,)) = box.call("ch05_clipping", "f", (x, y), {})
+        assert np.array_equal(x, [0.0, 2.0, 4.0])  # changed in place there, so here too
+        assert same_x is x and same_y is y  # an input returned is the caller's own array, as in one process
+        assert type(scalar) is np.float32 and scalar == 1.5 and type(integer) is int
+        assert small.dtype == np.int8 and np.array_equal(small, np.ones((2, 2)))
+    finally:
+        box.close()
+
+
+def test_the_worker_reaches_only_the_exposed_attributes_of_the_judge_s_objects(tmp_path):
+    folder = make_folder(
+        tmp_path,
+        """
+        def peek(config, name):
+            return getattr(config, name)
+
+        def call(config):
+            return config.validate()
+        """,
+    )
+    from minippo.ppo import Config
+
+    box = sandbox.Sandbox(folder)
+    try:
+        assert box.load("ch05_clipping") is None
+        assert box.call("ch05_clipping", "peek", (Config(), "clip_epsilon"), {}) == 0.2
+        # the proxy's own class, a handle of the worker's: nothing of the judge's Config
+        assert isinstance(box.call("ch05_clipping", "peek", (Config(), "__class__"), {}), sandbox.StudentObject)
+        for name in ("__dict__", "to_dict", "_private"):
+            with pytest.raises(sandbox.StudentRaised) as raised:
+                box.call("ch05_clipping", "peek", (Config(), name), {})
+            assert raised.value.kind == "AttributeError"
+        with pytest.raises(sandbox.StudentRaised):
+            box.call("ch05_clipping", "call", (Config(),), {})
+    finally:
+        box.close()
+
+
+def test_the_worker_cannot_import_the_reference_or_reach_the_repository(tmp_path):
+    folder = make_folder(
+        tmp_path,
+        f"""
+        import os, sys
+
+        def where():
+            return [p for p in sys.path if p.startswith({str(ROOT)!r})]
+
+        def read():
+            return open({str(ROOT / "README.md")!r}).read()
+
+        def import_solutions():
+            import solutions
+        """,
+    )
+    box = sandbox.Sandbox(folder)
+    try:
+        assert box.load("ch05_clipping") is None
+        assert box.call("ch05_clipping", "where", (), {}) == []
+        for name in ("read", "import_solutions"):
+            with pytest.raises(sandbox.StudentRaised):
+                box.call("ch05_clipping", name, (), {})
+        assert any("README.md" in note or "solutions" in note for note in box.notes), box.notes
+    finally:
+        box.close()
+
+
+def test_the_source_scan_names_the_library_s_answer_and_the_reference(tmp_path):
+    path = tmp_path / "ch05_clipping.py"
+    path.write_text("from minippo import losses\nimport solutions\n\ndef f(x):\n    return losses.clip_fraction(x)\n")
+    notes = sandbox.scan_source(path, "ch05_clipping")
+    assert any("imports solutions" in n for n in notes) and any("minippo.losses.clip_fraction" in n for n in notes)
+    # chapter 8's reference uses chapter 6's clip_objective from the library: not chapter 8's answer
+    assert sandbox.scan_source(ROOT / "solutions" / "ch08_shared_network.py", "ch08_shared_network") == []
+
+
+# Gradescope
+
+
+def gradescope_problems(report: dict) -> list[str]:
+    """What in ``report`` breaks Gradescope's documented results.json format (autograder specifications)."""
+    problems = []
+    top = {"score": (int, float), "execution_time": (int,), "output": (str,), "visibility": (str,),
+           "stdout_visibility": (str,), "extra_data": (dict,), "tests": (list,), "leaderboard": (list,),
+           "output_format": (str,), "test_output_format": (str,), "test_name_format": (str,)}  # fmt: skip
+    per_test = {"score": (int, float), "max_score": (int, float), "status": (str,), "name": (str,), "number": (str,),
+                "output": (str,), "tags": (list,), "visibility": (str,), "extra_data": (dict,),
+                "name_format": (str,), "output_format": (str,)}  # fmt: skip
+    visibilities = {"hidden", "after_due_date", "after_published", "visible"}
+    for key, value in report.items():
+        if key not in top or not isinstance(value, top[key]):
+            problems.append(f"top-level {key}")
+    if "score" not in report and not all("score" in t for t in report.get("tests", [])):
+        problems.append("no score")
+    for test in report.get("tests", []):
+        for key, value in test.items():
+            if key not in per_test or not isinstance(value, per_test[key]):
+                problems.append(f"test {key}")
+        if test.get("status", "passed") not in ("passed", "failed"):
+            problems.append("status")
+        if test.get("visibility", "visible") not in visibilities:
+            problems.append("visibility")
+    if report.get("stdout_visibility", "hidden") not in visibilities:
+        problems.append("stdout_visibility")
+    return problems
+
+
+@pytest.mark.timeout(600)
+def test_an_autograder_zip_grades_a_submission_laid_out_as_gradescope_does(tmp_path):
+    archive = tmp_path / "autograder.zip"
+    assert grade.autograder_zip(str(archive), "https://example.org/course.git", "0123abc", "5", sys.executable) == 0
+    autograder = tmp_path / "autograder"
+    with zipfile.ZipFile(archive) as opened:
+        assert sorted(opened.namelist()) == ["run_autograder", "setup.sh"]
+        opened.extractall(autograder / "source")
+        setup = opened.read("setup.sh").decode()
+        assert "git clone https://example.org/course.git" in setup and "checkout 0123abc" in setup
+        assert (opened.getinfo("run_autograder").external_attr >> 16) & 0o111
+    script = (autograder / "source" / "run_autograder").read_text()
+    # laid out as on Gradescope, under a temporary folder: the submission (uploaded as a folder), the results
+    (autograder / "submission" / "my-ppo").mkdir(parents=True)
+    (autograder / "submission" / "my-ppo" / "ch05_clipping.py").write_text(SOLUTION, encoding="utf-8")
+    script = script.replace("/autograder", str(autograder)).replace(f"cd {autograder}/course", f"cd {ROOT}")
+    env = {k: v for k, v in os.environ.items() if k != "MINIPPO_IMPL"}
+    done = subprocess.run(["bash", "-c", script], capture_output=True, text=True, timeout=500, env=env)
+    assert done.returncode == 0, done.stdout + done.stderr
+    report = json.loads((autograder / "results" / "results.json").read_text())
+    assert gradescope_problems(report) == [], report
+    (test,) = report["tests"]
+    assert test["score"] == test["max_score"] > 0 and test["status"] == "passed", test
+    assert report["score"] == test["score"]
+
+
+def test_gradescope_results_say_the_first_failure_and_the_integrity_notes():
+    results = [
+        grade.Result("tests/exercises/test_ch05_clipping.py::test_a", "passed"),
+        grade.Result("tests/exercises/test_ch05_clipping.py::test_b", "failed", "clip_fraction: first"),
+    ]
+    report = grade.gradescope_results(results, [5], {5: ["imports solutions"], "isolation": "process"}, 3.2)
+    assert gradescope_problems(report) == []
+    (test,) = report["tests"]
+    assert (test["score"], test["max_score"], test["status"]) == (1.0, 2.0, "failed")
+    assert test["output"].startswith("clip_fraction: first") and "imports solutions" in test["output"]
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--autograder-zip", "x.zip"], "needs --repo URL and --commit"),
+        (["--autograder-zip", "x.zip", "--repo", "a b", "--commit", "abc1234"], "not a repository address"),
+        (["--submission", "/no/such/folder"], "no submission folder"),
+        (["--gradescope", "/no/such/folder/results.json"], "no folder for the results file"),
+    ],
+)
+def test_bad_gradescope_arguments_get_one_line_and_exit_code_2(args, message):
+    result = subprocess.run(
+        [sys.executable, "-m", "minippo", "grade", *args], cwd=ROOT, capture_output=True, text=True, timeout=60
+    )
+    assert result.returncode == 2 and result.stdout == "", result.stdout + result.stderr
+    assert result.stderr.startswith("minippo: error: ") and message in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+
+
+# the limits: each abuse costs the call it is in, and the next call gets a working worker again
+
+ABUSES = {
+    "forks": ("import os\n\ndef f():\n    for _ in range(8):\n        os.fork()\n    return 1", "os.fork"),
+    "runs_a_command": ("import subprocess\n\ndef f():\n    return subprocess.run(['true']).returncode", "subprocess"),
+    "hogs_memory": ("def f():\n    return len(bytearray(16 << 30))", "MemoryError"),
+    "fills_the_disk": (
+        "def f():\n    with open('filler', 'wb') as out:\n        for _ in range(64):\n"
+        "            out.write(bytes(1 << 20))\n    return 1",
+        "File too large",
+    ),
+    "exits": ("import os\n\ndef f():\n    os._exit(3)", "exited with code 3"),
+    "burns_the_cpu": ("def f():\n    while True:\n        pass", "SIGXCPU"),
+    "calls_c": ("import ctypes\n\ndef f():\n    return ctypes.CDLL(None).getpid()", "ctypes"),
+}
+
+
+@pytest.mark.timeout(120)
+@pytest.mark.parametrize("abuse", list(ABUSES))
+def test_an_abuse_costs_its_own_call_only(tmp_path, abuse):
+    code, words = ABUSES[abuse]
+    folder = make_folder(tmp_path, code + "\n\ndef g(x):\n    return x + 1\n")
+    box = sandbox.Sandbox(folder, limits={"cpu_s": 3})
+    try:
+        assert box.load("ch05_clipping") is None
+        with pytest.raises((sandbox.StudentRaised, sandbox.WorkerDied)) as failed:
+            box.call("ch05_clipping", "f", (), {})
+        assert words in str(failed.value) + " ".join(box.notes), (str(failed.value), box.notes)
+        if not box.alive():
+            assert box.load("ch05_clipping") is None
+        assert box.call("ch05_clipping", "g", (np.float64(1.0),), {}) == 2.0
+    finally:
+        box.close()
+
+
+@pytest.mark.skipif(sandbox.isolation() != "namespaces", reason="no mount and PID namespaces on this machine")
+def test_with_namespaces_the_repository_and_the_class_are_not_there_at_all(tmp_path):
+    (tmp_path / "class" / "alice").mkdir(parents=True)
+    (tmp_path / "class" / "alice" / "ch05_clipping.py").write_text(SOLUTION)
+    (tmp_path / "class" / "bob").mkdir()
+    # os.stat is below the worker's guard (it reports opening and listing): what it finds is what the namespace shows
+    folder = make_folder(
+        tmp_path / "class" / "bob",
+        f"""
+        import os
+
+        def look():
+            paths = [{str(ROOT / "solutions" / "ch05_clipping.py")!r}, {str(tmp_path / "class" / "alice")!r}]
+            return [os.path.exists(path) for path in paths], sum(name.isdigit() for name in os.listdir("/proc"))
+        """,
+    )
+    box = sandbox.Sandbox(folder, hide=[tmp_path / "class"])
+    try:
+        assert box.load("ch05_clipping") is None
+        found, processes = box.call("ch05_clipping", "look", (), {})
+        assert found == [False, False] and processes <= 3, (found, processes)  # the shell, the worker
+    finally:
+        box.close()
+
+
+@pytest.mark.timeout(1800)
+def test_the_right_variants_keep_their_full_score_through_the_worker(tmp_path):
+    """The first other correct way of writing each chapter's exercises (tests/exercises/right/), laid out as a
+    student's folder: the reference module with the variant's functions swapped in, as load_wrong_variant swaps them
+    in one process. (test_grading_catches_mistakes.py grades every right variant in one process; this is one per
+    chapter, through the worker, each in its own pytest run.)"""
+    right = ROOT / "tests" / "exercises" / "right"
+    rejected, graded = [], 0
+    for test_file in grade.chapter_files().values():
+        chapter = test_file.stem[5:]
+        if not (right / f"{chapter}.py").exists():
+            continue
+        variants_text = (right / f"{chapter}.py").read_text(encoding="utf-8")
+        names = subprocess.run(
+            [sys.executable, "-c", f"import runpy; print(' '.join(runpy.run_path({str(right / f'{chapter}.py')!r})"
+             "['VARIANTS']))"], cwd=ROOT, capture_output=True, text=True, check=True,
+        ).stdout.split()  # fmt: skip
+        for variant in names[:1]:
+            folder = tmp_path / f"{chapter}-{variant}"
+            folder.mkdir()
+            # the variants' own import of the reference becomes an import of the student's module itself
+            (folder / f"_right_{chapter}.py").write_text(variants_text.replace("from solutions.", "from "))
+            swap = f"\nimport _right_{chapter}\n\nglobals().update(_right_{chapter}.VARIANTS[{variant!r}])\n"
+            (folder / f"{chapter}.py").write_text((ROOT / "solutions" / f"{chapter}.py").read_text() + swap)
+            collected, results, note = grade.run_tests(str(folder), [test_file], limit_s=600)
+            assert not note and collected, (chapter, variant, note)
+            graded += 1
+            rejected += [f"{chapter}:{variant}: {r.nodeid}: {r.message}" for r in results if r.outcome != "passed"]
+    assert graded >= 10 and not rejected, "\n".join(rejected[:10])
+
+
+def test_one_exercise_may_import_another_as_in_the_repository(tmp_path):
+    make_folder(tmp_path, "def f(x):\n    return 2 * x\n")
+    make_folder(tmp_path, "from exercises.ch05_clipping import f\n\ndef g(x):\n    return f(x) + 1\n", "ch06_the_min")
+    box = sandbox.Sandbox(tmp_path)
+    try:
+        assert box.load("ch06_the_min") is None
+        assert box.call("ch06_the_min", "g", (3,), {}) == 7
+    finally:
+        box.close()
