@@ -224,8 +224,8 @@ def train_rlhf(pretrained: ActorCritic, reward_model: RewardModel, config: RLHFC
 def pretrained_pieces(seed: int = 0, corpus_size: int = 3000, pairs: int = 2000, hidden: int = 128, epochs: int = 12):
     """The two pieces RLHF starts from, made from ``seed``: the language model pretrained on a corpus of the grammar
     (π_ref), and the reward model fitted to the rater's preferences. Returns (model, reward model, record), the
-    record holding the pretraining losses, the reward model's losses and its agreement with the rater on its own pairs
-    and on fresh ones (where ties count half)."""
+    record holding the pretraining losses, the reward model's losses, its agreement with the rater on its own pairs
+    and on fresh ones (where ties count half), and those pairs themselves (``preferences``: preferred, rejected)."""
     rng = np.random.default_rng(seed)
     tokens, lengths = make_corpus(corpus_size, rng)
     model = new_language_model(rng, hidden)
@@ -242,6 +242,7 @@ def pretrained_pieces(seed: int = 0, corpus_size: int = 3000, pairs: int = 2000,
         "held_out_accuracy": reward_model.accuracy(*held_out),
         # the rater's own rule as a model: the most any model can agree with the rater's noisy choices
         "rule_held_out_accuracy": float(np.mean((rule[0] > rule[1]) + 0.5 * (rule[0] == rule[1]))),
+        "preferences": (preferred, rejected),
     }
     return model, reward_model, record
 

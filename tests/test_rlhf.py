@@ -149,6 +149,8 @@ def test_the_pretrained_pieces_are_the_same_for_the_same_seed():
     first = pretrained_pieces(seed=5, corpus_size=200, pairs=100, hidden=16, epochs=2)
     second = pretrained_pieces(seed=5, corpus_size=200, pairs=100, hidden=16, epochs=2)
     assert np.array_equal(first[0].params, second[0].params) and np.array_equal(first[1].weights, second[1].weights)
+    pairs = first[2].pop("preferences"), second[2].pop("preferences")
+    assert all(np.array_equal(a, b) for side, again in zip(*pairs) for a, b in zip(side, again))
     assert first[2] == second[2]
 
 
