@@ -18,9 +18,8 @@ EXERCISES = ["bradley_terry_loss", "kl_shaped_rewards"]
 def bradley_terry_loss(scores_preferred: np.ndarray, scores_rejected: np.ndarray):
     """L = −Ê[log σ(r_w − r_l)] over n pairs, and its gradient with respect to both scores.
 
-    scores_preferred (r_w), scores_rejected (r_l): (n,).  Returns (loss, grad_preferred, grad_rejected): loss a float;
-    grad_preferred = ∂L/∂r_w = −σ(−Δ)/n and grad_rejected = ∂L/∂r_l = +σ(−Δ)/n, both (n,), with Δ = r_w − r_l.
-    Finite for margins of ±1000: −log σ(Δ) = log(1 + e^{−Δ}) is np.logaddexp(0, −Δ).
+    scores_preferred (r_w), scores_rejected (r_l): (n,).  Returns (loss, grad_preferred, grad_rejected): the loss as
+    a float, and ∂L/∂r_w and ∂L/∂r_l, both (n,). It must stay finite for margins r_w − r_l of ±1000.
     """
     raise NotImplementedError("write bradley_terry_loss, then run: minippo grade 12")
 

@@ -6,6 +6,9 @@ one to three adjectives joined by "and" or "but", each perhaps after "very", all
 language model is minippo's ActorCritic with a discrete head: its "observation" is a fixed description of the prefix
 (the last ``WINDOW`` tokens one-hot, the count of every token so far, and the position), its "action" the next token.
 Its value network is not used until the RL fine-tuning (minippo.rlhf).
+
+A prompt is the start of a sentence, its subject (``the film``); a response is what follows it (``was very good .``).
+Pretraining reads whole sentences; the fine-tuning gives the policy a prompt and lets it write the response.
 """
 
 from __future__ import annotations
@@ -30,12 +33,26 @@ V = len(VOCAB)
 WINDOW = 3  # the policy sees the last three tokens one-hot (and the counts of all the earlier ones)
 MAX_LEN = 16  # tokens generated at most; the grammar's longest sentence has 12
 OBS_DIM = WINDOW * V + V + MAX_LEN
+PROMPT_LEN = 2  # a prompt is the subject, DET NOUN
 
 
-def sample_sentence(rng: np.random.Generator) -> list[str]:
+def sample_prompt(rng: np.random.Generator, length: int = PROMPT_LEN) -> list[str]:
+    """The first ``length`` words (1 to 3) of a sentence of the grammar: DET, then NOUN, then VERB."""
+    return [str(rng.choice(words)) for words in (DETERMINERS, NOUNS, VERBS)[:length]]
+
+
+def make_prompts(n: int, rng: np.random.Generator, length: int = PROMPT_LEN) -> np.ndarray:
+    """``n`` prompts of ``length`` words as a (n, length) token array."""
+    return np.array([encode(sample_prompt(rng, length)) for _ in range(n)], dtype=np.int64).reshape(n, length)
+
+
+def sample_sentence(rng: np.random.Generator, prompt: list[str] | None = None) -> list[str]:
     """One sentence of the grammar: DET NOUN VERB ADJP ((and | but) ADJP){0,2} . with ADJP = [very] ADJ, the
-    adjectives all different."""
-    words = [rng.choice(DETERMINERS), rng.choice(NOUNS), rng.choice(VERBS)]
+    adjectives all different; if ``prompt`` (from sample_prompt) is given, the sentence continues it."""
+    if prompt is None:
+        words = [rng.choice(DETERMINERS), rng.choice(NOUNS), rng.choice(VERBS)]
+    else:
+        words = list(prompt) + [rng.choice(choices) for choices in (DETERMINERS, NOUNS, VERBS)[len(prompt) :]]
     count = 1 + rng.choice(3, p=[0.4, 0.4, 0.2])
     for i, adjective in enumerate(rng.choice(ADJECTIVES, size=count, replace=False)):
         if i:
@@ -76,12 +93,13 @@ def decode(tokens, length: int | None = None) -> str:
     return " ".join(VOCAB[t] for t in list(tokens)[:length])
 
 
-def make_corpus(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """``n`` sentences as a (n, MAX_LEN) token array (padded with BOS after the full stop) and their lengths."""
+def make_corpus(n: int, rng: np.random.Generator, prompts=None) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` sentences as a (n, MAX_LEN) token array (padded with BOS after the full stop) and their lengths; with
+    ``prompts`` (a list of n word lists), sentence i continues prompt i."""
     tokens = np.full((n, MAX_LEN), TOKEN[BOS], dtype=np.int64)
     lengths = np.zeros(n, dtype=np.int64)
     for i in range(n):
-        sentence = encode(sample_sentence(rng))
+        sentence = encode(sample_sentence(rng, None if prompts is None else prompts[i]))
         tokens[i, : len(sentence)] = sentence
         lengths[i] = len(sentence)
     return tokens, lengths
@@ -152,13 +170,17 @@ def pretrain(
     return history
 
 
-def generate(model: ActorCritic, n: int, rng: np.random.Generator, greedy: bool = False):
-    """Sample ``n`` sequences token by token. Returns (tokens (n, MAX_LEN), lengths): a sequence ends with its first
-    full stop, or after MAX_LEN tokens without one; the tokens after the end are BOS."""
+def generate(model: ActorCritic, n: int, rng: np.random.Generator, greedy: bool = False, prompts=None):
+    """Sample ``n`` sequences token by token, each continuing its row of ``prompts`` (n, P) if given. Returns
+    (tokens (n, MAX_LEN), lengths), prompts included: a sequence ends with its first full stop, or after MAX_LEN tokens
+    without one; the tokens after the end are BOS."""
     tokens = np.full((n, MAX_LEN), TOKEN[BOS], dtype=np.int64)
     lengths = np.full(n, MAX_LEN, dtype=np.int64)
     done = np.zeros(n, dtype=bool)
-    for t in range(MAX_LEN):
+    start = 0 if prompts is None else prompts.shape[1]
+    if start:
+        tokens[:, :start] = prompts
+    for t in range(start, MAX_LEN):
         dist = Categorical(model.policy_output(prefix_features(tokens, t)))
         action = dist.mode() if greedy else dist.sample(rng)
         tokens[:, t] = np.where(done, TOKEN[BOS], action)

@@ -6,11 +6,13 @@ import pytest
 from conftest import assert_close, numerical_gradient
 
 from minippo import language as lm
-from minippo.reward_model import RewardModel, bradley_terry_loss, rater_score, token_counts
+from minippo.reward_model import RewardModel, bradley_terry_loss, make_preferences, rater_score, token_counts
 from minippo.rlhf import (
     RLHFConfig,
+    collect,
     kl_shaped_rewards,
     pretrained_pieces,
+    proportional_beta,
     token_advantages,
     train_rlhf,
 )
@@ -149,6 +151,8 @@ def test_the_pretrained_pieces_are_the_same_for_the_same_seed():
     first = pretrained_pieces(seed=5, corpus_size=200, pairs=100, hidden=16, epochs=2)
     second = pretrained_pieces(seed=5, corpus_size=200, pairs=100, hidden=16, epochs=2)
     assert np.array_equal(first[0].params, second[0].params) and np.array_equal(first[1].weights, second[1].weights)
+    pairs = first[2].pop("preferences"), second[2].pop("preferences")
+    assert all(np.array_equal(a, b) for side, again in zip(*pairs) for a, b in zip(side, again))
     assert first[2] == second[2]
 
 
@@ -161,3 +165,29 @@ def test_the_same_seed_gives_the_same_run_bitwise(pieces):
     assert not np.array_equal(
         first.params, train_rlhf(model, reward_model, RLHFConfig(seed=4, beta=0.2, updates=2, sequences=16))[0].params
     )
+
+
+def test_preference_pairs_share_their_prompt_and_the_reward_model_reads_the_response(rng):
+    preferred, rejected = make_preferences(50, rng)
+    assert np.array_equal(preferred[0][:, : lm.PROMPT_LEN], rejected[0][:, : lm.PROMPT_LEN])
+    assert not np.array_equal(preferred[0], rejected[0])
+    model = RewardModel()
+    model.weights[lm.TOKEN["the"]], model.weights[lm.TOKEN["good"]] = 5.0, 1.0
+    tokens = lm.encode("the film was good .".split())[None, :]
+    assert model.score(tokens, np.array([5]))[0] == 1.0  # "the" is in the prompt, so it is not counted
+
+
+def test_collect_answers_the_prompts_and_charges_the_kl_on_the_response_only(pieces):
+    model, reward_model, _ = pieces
+    prompts = lm.make_prompts(6, np.random.default_rng(0))
+    batch = collect(model, model, reward_model, prompts, 0.3, np.random.default_rng(1), response_len=4)
+    assert np.array_equal(batch["tokens"][:, : lm.PROMPT_LEN], prompts)
+    assert batch["logp"].shape == (6, 4) and np.all((1 <= batch["lengths"]) & (batch["lengths"] <= 4))
+    assert np.allclose(batch["logp"], batch["logp_ref"])  # the policy is its own reference here: no penalty
+    assert np.allclose(batch["rewards"].sum(axis=1), batch["scores"])
+
+
+def test_proportional_beta_moves_by_at_most_the_clipped_error():
+    assert proportional_beta(1.0, 2.0, 2.0) == 1.0
+    assert np.isclose(proportional_beta(1.0, 100.0, 2.0), 1.02) and np.isclose(proportional_beta(1.0, 0.0, 2.0), 0.98)
+    assert np.isclose(proportional_beta(0.5, 2.2, 2.0), 0.5 * (1 + 0.1 * 0.1))

@@ -10,6 +10,8 @@ from minippo import advantages as adv
 from minippo import losses
 from minippo.agent import ActorCritic
 from minippo.distributions import Categorical, DiagGaussian
+from minippo.dpo import dpo_loss
+from minippo.grpo import group_advantages
 from minippo.network import MLP, linear_backward, tanh_backward
 from minippo.optimizer import Adam
 from minippo.ppo import Config, update_minibatch
@@ -28,6 +30,7 @@ from solutions import (
     ch09_kl_penalty,
     ch10_ppo_update,
     ch12_language_model,
+    ch13_grpo_dpo,
 )
 
 pytestmark = pytest.mark.timeout(60)
@@ -226,3 +229,13 @@ def test_language_model(seed):
         ch12_language_model.kl_shaped_rewards(logp, logp_ref, scores, lengths, 0.4),
         kl_shaped_rewards(logp, logp_ref, scores, lengths, 0.4),
     )
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_grpo_and_dpo(seed):
+    rng = np.random.default_rng(seed)
+    scores = rng.normal(size=(5, 6))
+    scores[0] = 1.5  # a group that all scored the same
+    same(ch13_grpo_dpo.grpo_advantages(scores), group_advantages(scores))
+    logps = [rng.normal(-6.0, 2.0, 8) for _ in range(4)]
+    same(ch13_grpo_dpo.dpo_loss(*logps, 0.4), dpo_loss(*logps, 0.4))

@@ -1,0 +1,133 @@
+"""GRPO (Shao et al. 2024): PPO without a value network. Each prompt is answered G times, and a response's advantage
+is its score measured against the others in its group,
+
+    Â_i = (R_i − mean(R_1 … R_G)) / (std(R_1 … R_G) + ε_std),
+
+the same for every token of response i. The KL to the reference is not in the reward but in the loss, per token, with
+Schulman's (2020) "k3" estimator of KL[π_θ ‖ π_ref], unbiased on tokens sampled from π_θ and never negative:
+
+    k3_t = π_ref/π_θ − log(π_ref/π_θ) − 1,      ∂k3_t/∂ log π_θ = 1 − π_ref/π_θ.
+
+The objective is L^CLIP's clipped ratio with these advantages, minus β k3, averaged over each response's tokens and
+then over the responses (Shao et al.'s eq. 3). Everything else is minippo's: the language model, the categorical,
+Adam, and the collection of responses of minippo.rlhf.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from minippo import losses
+from minippo.agent import ActorCritic
+from minippo.distributions import Categorical
+from minippo.language import PROMPT_LEN, make_prompts
+from minippo.optimizer import Adam, clip_grad_norm
+from minippo.reward_model import RewardModel
+from minippo.rlhf import collect, copy_model, sequence_stats
+
+
+@dataclass
+class GRPOConfig:
+    seed: int = 0
+    updates: int = 80  # iterations
+    prompts: int = 8  # prompts per iteration
+    group: int = 8  # G, responses per prompt (prompts × group responses per iteration)
+    beta: float = 0.04  # β of the k3 KL in the loss (Shao et al.'s value)
+    clip_epsilon: float = 0.2  # ε
+    epochs: int = 4  # K
+    minibatch_responses: int = 16  # responses per minibatch
+    lr: float = 1e-3  # Adam's step size
+    max_grad_norm: float = 0.5
+    prompt_len: int = PROMPT_LEN
+    response_len: int | None = None  # the longest response (None: up to MAX_LEN tokens in all)
+
+
+def group_advantages(scores: np.ndarray, eps: float = 1e-8) -> np.ndarray:
+    """Â = (R − mean of its group) / (std of its group + eps), for scores (m, G), one row per prompt; the std is
+    the population one (ddof = 0). A group whose responses all score the same gets advantages of 0."""
+    centred = scores - scores.mean(axis=1, keepdims=True)
+    return centred / (scores.std(axis=1, keepdims=True) + eps)
+
+
+def k3(logp: np.ndarray, logp_ref: np.ndarray) -> np.ndarray:
+    """k3 = π_ref/π − log(π_ref/π) − 1 per token: an estimate of KL[π ‖ π_ref] from a token sampled from π."""
+    log_ratio = logp_ref - logp
+    return np.exp(log_ratio) - log_ratio - 1.0
+
+
+def grpo_objective(logp, logp_old, logp_ref, advantages, weights, epsilon: float, beta: float):
+    """J = Σ_t w_t [min(r_t Â_t, clip(r_t, 1−ε, 1+ε) Â_t) − β k3_t], with r_t = π_θ/π_θold and w_t the weight of
+    token t (1 / (responses × the length of its response), so that each response counts once).
+
+    Returns (J, ∂J/∂ log π_θ): w_t (r_t Â_t where the unclipped term is the smaller, else 0, − β (1 − π_ref/π_θ)).
+    """
+    ratio = np.exp(logp - logp_old)
+    unclipped = ratio * advantages
+    clipped = np.clip(ratio, 1.0 - epsilon, 1.0 + epsilon) * advantages
+    value = float(np.sum(weights * (np.minimum(unclipped, clipped) - beta * k3(logp, logp_ref))))
+    grad = weights * (np.where(unclipped <= clipped, unclipped, 0.0) - beta * (1.0 - np.exp(logp_ref - logp)))
+    return value, grad
+
+
+def grpo_step(policy, optimizer: Adam, minibatch: dict, config: GRPOConfig) -> float:
+    """One Adam step that raises the GRPO objective on one minibatch of tokens (after the gradient-norm clip)."""
+    logits, cache = policy.forward(minibatch["obs"])
+    dist = Categorical(logits)
+    logp = dist.log_prob(minibatch["actions"])
+    value, grad_logp = grpo_objective(
+        logp,
+        minibatch["logp"],
+        minibatch["logp_ref"],
+        minibatch["advantages"],
+        minibatch["weights"],
+        config.clip_epsilon,
+        config.beta,
+    )
+    (grad_logits,) = dist.log_prob_backward(minibatch["actions"], -grad_logp)  # minimise −J
+    policy.backward(cache, grad_logits)
+    clip_grad_norm(policy.grads, config.max_grad_norm)
+    optimizer.step(policy.grads)
+    return value
+
+
+def train_grpo(pretrained: ActorCritic, reward_model: RewardModel, config: GRPOConfig, on_update=None):
+    """Fine-tune a copy of ``pretrained`` (π_ref, never changed) with GRPO. Its value network is never used.
+    ``on_update(stats, policy)`` is called after every iteration. Returns (the fine-tuned model, statistics)."""
+    rng = np.random.default_rng(config.seed)
+    agent, reference = copy_model(pretrained), copy_model(pretrained)
+    policy = agent.nets["policy"]
+    optimizer = Adam(policy.params, lr=config.lr)
+    history = []
+    for update in range(1, config.updates + 1):
+        prompts = np.repeat(make_prompts(config.prompts, rng, config.prompt_len), config.group, axis=0)
+        batch = collect(agent, reference, reward_model, prompts, 0.0, rng, config.response_len)
+        advantages = group_advantages(batch["scores"].reshape(config.prompts, config.group)).reshape(-1)
+        n_responses = len(prompts)
+        for _ in range(config.epochs):
+            order = rng.permutation(n_responses)
+            for start in range(0, n_responses, config.minibatch_responses):
+                take = order[start : start + config.minibatch_responses]
+                lengths = batch["lengths"][take]
+                valid = np.arange(batch["logp"].shape[1])[None, :] < lengths[:, None]
+                minibatch = {key: batch[key][take][valid] for key in ("obs", "actions", "logp", "logp_ref")}
+                minibatch["advantages"] = np.broadcast_to(advantages[take][:, None], valid.shape)[valid]
+                per_token = 1.0 / (len(take) * lengths)
+                minibatch["weights"] = np.broadcast_to(per_token[:, None], valid.shape)[valid]
+                grpo_step(policy, optimizer, minibatch, config)
+        valid = np.arange(batch["logp"].shape[1])[None, :] < batch["lengths"][:, None]
+        logp_after = Categorical(policy(batch["obs"][valid])).log_prob(batch["actions"][valid])
+        stats = {
+            "update": update,
+            "score": float(np.mean(batch["scores"])),
+            **sequence_stats(batch["tokens"], batch["text_lengths"]),
+            "kl_to_reference": float(np.mean(np.where(valid, batch["logp"] - batch["logp_ref"], 0.0).sum(axis=1))),
+            "length": float(np.mean(batch["lengths"])),
+            "approx_kl": losses.approx_kl(logp_after, batch["logp"][valid]),
+            "clip_fraction": losses.clip_fraction(logp_after, batch["logp"][valid], config.clip_epsilon),
+        }
+        history.append(stats)
+        if on_update is not None:
+            on_update(stats, agent)
+    return agent, history

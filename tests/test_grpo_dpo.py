@@ -1,0 +1,132 @@
+"""GRPO and DPO in miniature: their hand-derived gradients against central finite differences in float64, the
+group-relative advantages, the k3 estimator, the enumerable optimum π*, and short runs that learn."""
+
+import numpy as np
+import pytest
+from conftest import assert_close, numerical_gradient
+
+from minippo import language as lm
+from minippo.distributions import Categorical
+from minippo.dpo import DPOConfig, dpo_loss, dpo_loss_and_grad, response_tokens, sequence_log_probs, train_dpo
+from minippo.grpo import GRPOConfig, group_advantages, grpo_objective, k3, train_grpo
+from minippo.reward_model import make_preferences
+from minippo.rlhf import (
+    all_prompts,
+    mean_kl,
+    optimal_log_probs,
+    pretrained_pieces,
+    response_log_probs,
+    short_response_scores,
+    short_responses,
+)
+
+
+def test_group_advantages_are_standardised_within_each_group_only():
+    scores = np.array([[1.0, 2.0, 3.0, 6.0], [10.0, 10.0, 10.0, 10.0], [-5.0, 5.0, 0.0, 0.0]])
+    advantages = group_advantages(scores)
+    assert_close(advantages.mean(axis=1), np.zeros(3), atol=1e-12)
+    assert_close(advantages[[0, 2]].std(axis=1), np.ones(2), rtol=1e-6)
+    assert np.all(advantages[1] == 0.0)  # a group that all scored the same teaches nothing
+    assert_close(advantages[0], (scores[0] - 3.0) / np.sqrt(3.5), rtol=1e-6)
+
+
+def test_k3_is_an_unbiased_never_negative_estimate_of_the_kl(rng):
+    logits, logits_ref = rng.normal(size=6), rng.normal(size=6)
+    p, q = np.exp(logits - np.logaddexp.reduce(logits)), np.exp(logits_ref - np.logaddexp.reduce(logits_ref))
+    estimates = k3(np.log(p), np.log(q))
+    assert np.all(estimates >= 0.0)
+    assert np.isclose(p @ estimates, p @ np.log(p / q))  # its expectation under π is KL[π ‖ π_ref], exactly
+
+
+def test_grpo_objective_gradient_matches_finite_differences(rng):
+    n = 12
+    logp_old = np.log(rng.uniform(0.05, 0.9, n))
+    logp = logp_old + rng.normal(0, 0.3, n)
+    logp_ref = np.log(rng.uniform(0.05, 0.9, n))
+    advantages, weights = rng.normal(size=n), rng.uniform(0.01, 0.2, n)
+    ratio = np.exp(logp - logp_old)
+    assert np.all(np.abs(ratio - 0.8) > 1e-4) and np.all(np.abs(ratio - 1.2) > 1e-4)  # away from the kinks
+    value, grad = grpo_objective(logp, logp_old, logp_ref, advantages, weights, 0.2, 0.3)
+    numeric = numerical_gradient(
+        lambda: grpo_objective(logp, logp_old, logp_ref, advantages, weights, 0.2, 0.3)[0], logp
+    )
+    assert_close(grad, numeric)
+    assert (np.abs(ratio - 1) > 0.2).any()  # some tokens are clipped, so both branches are checked
+
+
+def test_dpo_loss_gradient_matches_finite_differences(rng):
+    logp_w, logp_l = rng.normal(-6, 2, 9), rng.normal(-6, 2, 9)
+    ref_w, ref_l = rng.normal(-6, 2, 9), rng.normal(-6, 2, 9)
+    loss, grad_w, grad_l = dpo_loss(logp_w, logp_l, ref_w, ref_l, 0.7)
+    margin = 0.7 * ((logp_w - ref_w) - (logp_l - ref_l))
+    assert np.isclose(loss, np.mean(np.log1p(np.exp(-margin))))
+    assert_close(grad_w, numerical_gradient(lambda: dpo_loss(logp_w, logp_l, ref_w, ref_l, 0.7)[0], logp_w))
+    assert_close(grad_l, numerical_gradient(lambda: dpo_loss(logp_w, logp_l, ref_w, ref_l, 0.7)[0], logp_l))
+
+
+def test_dpo_gradient_through_the_language_model_matches_finite_differences(rng):
+    model = lm.new_language_model(rng, hidden=6)
+    model.params[...] += 0.3 * rng.standard_normal(model.params.shape)
+    policy = model.nets["policy"]
+    preferred, rejected = make_preferences(3, rng)
+    data_w, data_l = response_tokens(*preferred, lm.PROMPT_LEN), response_tokens(*rejected, lm.PROMPT_LEN)
+    ref_w, ref_l = rng.normal(-8, 1, 3), rng.normal(-8, 1, 3)
+    dpo_loss_and_grad(policy, data_w, data_l, ref_w, ref_l, 0.5)
+    analytic = policy.grads.copy()
+    numeric = numerical_gradient(lambda: dpo_loss_and_grad(policy, data_w, data_l, ref_w, ref_l, 0.5), policy.params)
+    assert_close(analytic, numeric, rtol=1e-6, atol=1e-9)
+    # and the sequence log-probability is the sum of the response's tokens, prompt excluded
+    logp, _ = sequence_log_probs(policy, data_w, 3)
+    tokens, lengths = preferred
+    by_hand = sum(
+        Categorical(policy(lm.prefix_features(tokens[:1], t))).log_prob(tokens[:1, t])[0]
+        for t in range(lm.PROMPT_LEN, lengths[0])
+    )
+    assert np.isclose(logp[0], by_hand)
+
+
+def test_the_enumerated_responses_are_a_distribution_and_pi_star_closes_the_gap():
+    model, reward_model, _ = pretrained_pieces(seed=5, corpus_size=200, pairs=100, hidden=16, epochs=2)
+    prompts = all_prompts(3)
+    assert prompts.shape == (72, 3)
+    tokens, lengths = short_responses()
+    assert len(tokens) == 1 + (lm.V - 1) * lm.V and lengths[0] == 1
+    logp_ref = response_log_probs(model, prompts)
+    assert_close(np.exp(logp_ref).sum(axis=1), np.ones(72), atol=1e-12)
+    scores = short_response_scores(reward_model)
+    beta = 0.5
+    logp_star, log_z = optimal_log_probs(logp_ref, scores, beta)
+
+    def objective(logp):
+        return float(np.mean(np.sum(np.exp(logp) * (scores[None, :] - beta * (logp - logp_ref)), axis=1)))
+
+    assert np.isclose(objective(logp_star), beta * log_z.mean())  # J(π*) = β Ê log Z
+    assert np.isclose(objective(logp_star) - objective(logp_ref), beta * mean_kl(logp_ref, logp_star))
+    assert mean_kl(logp_star, logp_star) == 0.0 and mean_kl(logp_ref, logp_star) > 0.0
+
+
+@pytest.fixture(scope="module")
+def small_pieces():
+    return pretrained_pieces(seed=0, corpus_size=1000, pairs=1000, hidden=32, epochs=6)
+
+
+@pytest.mark.timeout(300)
+def test_grpo_raises_the_score_and_dpo_fits_the_pairs(small_pieces):
+    model, reward_model, _ = small_pieces
+    before = model.params.copy()
+    _, grpo = train_grpo(model, reward_model, GRPOConfig(updates=15, prompts=4, group=8))
+    assert np.mean([s["score"] for s in grpo[-3:]]) > np.mean([s["score"] for s in grpo[:3]]) + 0.5
+    preferred, rejected = make_preferences(400, np.random.default_rng(7))
+    _, dpo = train_dpo(model, preferred, rejected, DPOConfig(epochs=3))
+    assert dpo[-1]["loss"] < dpo[0]["loss"] and dpo[-1]["accuracy"] > 0.6
+    assert np.array_equal(model.params, before), "the reference policy must stay frozen"
+
+
+def test_grpo_and_dpo_are_the_same_for_the_same_seed(small_pieces):
+    model, reward_model, _ = small_pieces
+    config = GRPOConfig(updates=2, prompts=2, group=4)
+    first, again = train_grpo(model, reward_model, config), train_grpo(model, reward_model, config)
+    assert np.array_equal(first[0].params, again[0].params) and first[1] == again[1]
+    preferred, rejected = make_preferences(50, np.random.default_rng(3))
+    first, again = (train_dpo(model, preferred, rejected, DPOConfig(epochs=1)) for _ in range(2))
+    assert np.array_equal(first[0].params, again[0].params) and first[1] == again[1]
