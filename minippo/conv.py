@@ -26,7 +26,9 @@ def patches(x: np.ndarray, kh: int, kw: int) -> np.ndarray:
 def conv2d_forward(x: np.ndarray, K: np.ndarray, b: np.ndarray) -> np.ndarray:
     """y = x ⋆ K + b for a batch x of shape (n, H, W, C) and K of shape (kh, kw, C, F): (n, H−kh+1, W−kw+1, F)."""
     kh, kw, C, F = K.shape
-    return patches(x, kh, kw).dot(K.reshape(kh * kw * C, F)) + b
+    cols = patches(x, kh, kw)
+    rows = cols.reshape(-1, kh * kw * C)  # a 2-D product: NumPy hands only those to BLAS
+    return (rows.dot(K.reshape(kh * kw * C, F)) + b).reshape(*cols.shape[:3], F)
 
 
 def conv2d_backward(x: np.ndarray, K: np.ndarray, grad_y: np.ndarray, need_grad_x: bool = True):
