@@ -240,7 +240,11 @@ def build_parser() -> Parser:
         epilog=config_help(),
         formatter_class=lambda prog: HelpWithDefaults(prog, width=120),
     )
-    p.add_argument("env_id", help="a Gymnasium id with flat Box observations, e.g. CartPole-v1 or Hopper-v5")
+    p.add_argument(
+        "env_id",
+        help="a Gymnasium id with flat or image Box observations, e.g. CartPole-v1, Hopper-v5, or "
+        "MinAtar/Breakout-v1 (with --preset atari)",
+    )
     p.add_argument(
         "--steps",
         type=int,
