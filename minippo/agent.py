@@ -1,5 +1,6 @@
 """The actor-critic: the policy π_θ and the value function V, as two MLPs (the paper's MuJoCo setup) or one shared
-trunk with two heads (eq. 9), all parameters in one flat vector. Saving and loading the policy live here too."""
+trunk with two heads (eq. 9), the trunk a tanh MLP or, for images, a small convolutional network (the paper's Atari
+setup, in MinAtar's size); all parameters in one flat vector. Saving and loading the policy live here too."""
 
 from __future__ import annotations
 
@@ -9,12 +10,14 @@ import zipfile
 import numpy as np
 
 from minippo.checkpoint import write_atomically
+from minippo.conv import ConvTrunk
 from minippo.distributions import Categorical, DiagGaussian
 from minippo.errors import MinippoError
 from minippo.network import MLP
 from minippo.normalization import ObservationNormalizer
 
 SQRT2 = float(np.sqrt(2.0))
+NETWORKS = ("mlp", "minatar_cnn")
 
 
 class ActorCritic:
@@ -29,34 +32,61 @@ class ActorCritic:
         orthogonal_init: bool = True,
         rng: np.random.Generator | None = None,
         dtype="float64",
+        network: str = "mlp",
+        image_shape: tuple[int, int, int] | None = None,
     ):
         if kind not in ("discrete", "continuous"):
             raise ValueError(f"kind must be 'discrete' or 'continuous', not {kind!r}")
+        if network not in NETWORKS:
+            raise ValueError(f"network must be one of {', '.join(NETWORKS)}, not {network!r}")
         self.obs_dim, self.kind, self.act_dim = int(obs_dim), kind, int(act_dim)
         self.hidden_sizes, self.shared = tuple(int(h) for h in hidden_sizes), bool(shared)
+        self.network = network
+        self.image_shape = None if image_shape is None else tuple(int(s) for s in image_shape)
         hidden = self.hidden_sizes
-        if shared:
-            specs = [  # (name, sizes, output gain, tanh after the last layer)
-                ("trunk", (obs_dim, *hidden), SQRT2, True),
-                ("policy", (hidden[-1], act_dim), 0.01, False),
-                ("value", (hidden[-1], 1), 1.0, False),
+
+        def mlp(sizes, activate):
+            return lambda params=None, grads=None: MLP(sizes, activate_output=activate, params=params, grads=grads)
+
+        if network == "minatar_cnn":  # conv(16, 3×3) → ReLU → dense 128 → ReLU, read by both heads (eq. 9)
+            if self.image_shape is None or len(self.image_shape) != 3 or np.prod(self.image_shape) != self.obs_dim:
+                raise ValueError(f"network 'minatar_cnn' needs images (H, W, C) of {obs_dim} numbers")
+            self.shared = True
+
+            def conv(params=None, grads=None):
+                return ConvTrunk(self.image_shape, params=params, grads=grads)
+
+            features = conv().dense_shape[1]
+            specs = [  # (name, a maker of the net on given buffers, output gain)
+                ("trunk", conv, SQRT2),
+                ("policy", mlp((features, act_dim), False), 0.01),
+                ("value", mlp((features, 1), False), 1.0),
+            ]
+        elif shared:
+            specs = [
+                ("trunk", mlp((obs_dim, *hidden), True), SQRT2),  # tanh after the trunk's last layer too
+                ("policy", mlp((hidden[-1], act_dim), False), 0.01),
+                ("value", mlp((hidden[-1], 1), False), 1.0),
             ]
         else:
-            specs = [("policy", (obs_dim, *hidden, act_dim), 0.01, False), ("value", (obs_dim, *hidden, 1), 1.0, False)]
-        sizes = [MLP(s, activate_output=a).n_params for _, s, _, a in specs]
+            specs = [
+                ("policy", mlp((obs_dim, *hidden, act_dim), False), 0.01),
+                ("value", mlp((obs_dim, *hidden, 1), False), 1.0),
+            ]
+        sizes = [make().n_params for _, make, _ in specs]
         n_log_std = act_dim if kind == "continuous" else 0
         self.dtype = np.dtype(dtype)  # float64 for gradient checks; training defaults to float32 (Config.dtype)
         self.params = np.zeros(sum(sizes) + n_log_std, dtype=self.dtype)
         self.grads = np.zeros_like(self.params)
         offset, self.nets = 0, {}
-        for (name, net_sizes, gain, activate), size in zip(specs, sizes):
+        for (name, make, _), size in zip(specs, sizes):
             view = slice(offset, offset + size)
-            self.nets[name] = MLP(net_sizes, gain, activate, None, self.params[view], self.grads[view])
+            self.nets[name] = make(self.params[view], self.grads[view])
             offset += size
         self.log_std = self.params[offset:]
         self.grad_log_std = self.grads[offset:]
         if rng is not None:
-            for name, _, gain, _ in specs:
+            for name, _, gain in specs:
                 self.nets[name].init(rng, gain, SQRT2, orthogonal_init)
             self.log_std[...] = log_std_init
 
@@ -111,6 +141,8 @@ class ActorCritic:
             "hidden_sizes": list(self.hidden_sizes),
             "dtype": self.dtype.name,
             "shared": self.shared,
+            "network": self.network,
+            "image_shape": None if self.image_shape is None else list(self.image_shape),
         }
 
 
@@ -143,6 +175,8 @@ def load_policy(path):
             meta["hidden_sizes"],
             meta["shared"],
             dtype=meta.get("dtype", "float64"),
+            network=meta.get("network", "mlp"),
+            image_shape=meta.get("image_shape"),
         )
         if stored["params"].shape != agent.params.shape:
             raise ValueError("weights of the wrong size")

@@ -12,7 +12,9 @@ from pathlib import Path
 
 from minippo.errors import ConfigError, MinippoError, NonFiniteError
 from minippo.ppo import OBJECTIVES, Config
+from minippo.presets import PRESETS
 
+PRESET_NAMES = tuple(PRESETS)
 RUN_FILES = ("config.json", "progress.csv", "policy.npz", "checkpoint.npz", "curve.png")
 
 
@@ -60,7 +62,14 @@ FLAGS = {"env_id": "ENV", "total_steps": "--steps", "seed": "--seed", "objective
 def config_from_args(args) -> Config:
     """The Config of ``minippo train`` (and of a sweep's runs): ENV, --steps, --seed, --objective, --config."""
     config = Config(env_id=args.env_id, total_steps=args.steps, seed=args.seed, objective=args.objective)
-    return config.with_overrides(args.config)
+    return config.with_overrides(with_preset(args))
+
+
+def with_preset(args) -> list[str]:
+    """--config's KEY=VALUE texts, after those of --preset (so that --config overrides the preset)."""
+    from minippo.presets import preset_overrides
+
+    return (preset_overrides(args.preset) if getattr(args, "preset", None) else []) + list(args.config)
 
 
 def config_help() -> str:
@@ -223,7 +232,7 @@ def cmd_sweep(args) -> int:
     for key, _ in grid:
         if key in ("env_id", "seed", "total_steps"):
             raise MinippoError(f"--grid {key}: give the tasks, --seeds and --steps instead")
-    runs = sweep.plan(args.env_ids, seeds, args.steps, grid, args.objective, args.config)
+    runs = sweep.plan(args.env_ids, seeds, args.steps, grid, args.objective, with_preset(args))
     from minippo.envs import make_env
 
     for env_id in args.env_ids:  # an unknown id is refused before Ray starts
@@ -282,7 +291,11 @@ def build_parser() -> Parser:
         epilog=config_help(),
         formatter_class=lambda prog: HelpWithDefaults(prog, width=120),
     )
-    p.add_argument("env_id", help="a Gymnasium id with flat Box observations, e.g. CartPole-v1 or Hopper-v5")
+    p.add_argument(
+        "env_id",
+        help="a Gymnasium id with flat or image Box observations, e.g. CartPole-v1, Hopper-v5, or "
+        "MinAtar/Breakout-v1 (with --preset atari)",
+    )
     p.add_argument(
         "--steps",
         type=int,
@@ -294,6 +307,9 @@ def build_parser() -> Parser:
     p.add_argument("--objective", choices=OBJECTIVES, default="clip", help=Config.field_help()["objective"][1])
     p.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE",
                    help="override any field of minippo.Config, e.g. horizon=512 entropy_coef=0.01")  # fmt: skip
+    p.add_argument("--preset", choices=PRESET_NAMES,
+                   help="start from named settings (minippo/presets.py): atari is the paper's Table 5 on MinAtar's "
+                   "network, a2c its A2C baseline; --config overrides them")  # fmt: skip
     p.add_argument("--force", action="store_true", help="overwrite the run files in an existing --out")
     p.add_argument("--resume", action="store_true", help="continue from --out's last checkpoint")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -326,6 +342,7 @@ def build_parser() -> Parser:
     p.add_argument("--grid", action="append", default=[], metavar="KEY=V1,V2", help="a Config field and its values")
     p.add_argument("--objective", choices=OBJECTIVES, default="clip", help=Config.field_help()["objective"][1])
     p.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE", help="override Config fields in every run")
+    p.add_argument("--preset", choices=PRESET_NAMES, help="start every run from named settings (as minippo train)")
     p.add_argument("--out", required=True, help="the folder of run folders (and of sweep.csv)")
     p.add_argument("--csv", help="the sweep's CSV (default OUT/sweep.csv)")
     p.add_argument("--workers", type=int, help="runs at once (default: every core, or every CPU of the cluster)")

@@ -13,6 +13,10 @@ from minippo.errors import MinippoError
 
 
 def check_env_id(env_id: str) -> None:
+    if env_id.startswith("MinAtar/"):  # registered on first use, since minatar is an optional dependency
+        from minippo.minatar import register_games
+
+        register_games()
     if env_id in gym.registry:
         return
     # near misses only (a typo, a case slip, another version): an id that resembles nothing gets no guess
@@ -23,19 +27,42 @@ def check_env_id(env_id: str) -> None:
 
 
 def spaces_of(env: gym.Env) -> tuple[int, str, int]:
-    """Return (observation size, 'discrete' or 'continuous', number of actions or action size)."""
+    """Return (observation size, 'discrete' or 'continuous', number of actions or action size). An image's size is
+    its number of entries, H·W·C: minippo carries images as flat rows (see ``FlatImages``)."""
     obs_space, action_space = env.observation_space, env.action_space
-    if not (isinstance(obs_space, gym.spaces.Box) and len(obs_space.shape) == 1):
+    if not (isinstance(obs_space, gym.spaces.Box) and len(obs_space.shape) in (1, 3)):
         raise MinippoError(
-            f"unsupported observation space {type(obs_space).__name__}: minippo handles flat Box observations only"
+            f"unsupported observation space {type(obs_space).__name__}{getattr(obs_space, 'shape', '')}: minippo "
+            "handles Box observations that are flat or images (H, W, C)"
         )
+    obs_dim = int(np.prod(obs_space.shape))
     if isinstance(action_space, gym.spaces.Discrete):
-        return obs_space.shape[0], "discrete", int(action_space.n)
+        return obs_dim, "discrete", int(action_space.n)
     if isinstance(action_space, gym.spaces.Box) and len(action_space.shape) == 1:
-        return obs_space.shape[0], "continuous", action_space.shape[0]
+        return obs_dim, "continuous", action_space.shape[0]
     raise MinippoError(
         f"unsupported action space {type(action_space).__name__}: minippo handles Discrete and flat Box actions"
     )
+
+
+def image_shape_of(env: gym.Env) -> tuple[int, int, int] | None:
+    """(H, W, C) of an environment whose observations are images, else None."""
+    shape = getattr(env, "image_shape", env.observation_space.shape)
+    return tuple(shape) if len(shape) == 3 else None
+
+
+class FlatImages(gym.ObservationWrapper):
+    """Image observations (H, W, C) as flat rows of H·W·C numbers in row-major order, so that the rollout, the
+    normalisation and the batch treat them like any vector; the convolutional trunk reshapes them back."""
+
+    def __init__(self, env: gym.Env):
+        super().__init__(env)
+        self.image_shape = tuple(env.observation_space.shape)
+        space = env.observation_space
+        self.observation_space = gym.spaces.Box(space.low.reshape(-1), space.high.reshape(-1), dtype=space.dtype)
+
+    def observation(self, observation):
+        return np.asarray(observation).reshape(-1)
 
 
 def make_env(env_id: str, render_mode: str | None = None, size: int | None = None) -> gym.Env:
@@ -61,7 +88,7 @@ def make_env(env_id: str, render_mode: str | None = None, size: int | None = Non
         reason = str(error).splitlines()[0] if str(error) else type(error).__name__
         raise MinippoError(f"cannot make '{env_id}': {reason}")
     spaces_of(env)
-    return env
+    return FlatImages(env) if len(env.observation_space.shape) == 3 else env
 
 
 def action_bounds(env: gym.Env):

@@ -33,9 +33,9 @@ from threadpoolctl import threadpool_limits
 
 from minippo import advantages as adv
 from minippo import losses
-from minippo.agent import ActorCritic, save_policy
+from minippo.agent import NETWORKS, ActorCritic, save_policy
 from minippo.checkpoint import write_atomically
-from minippo.envs import make_env, spaces_of
+from minippo.envs import image_shape_of, make_env, spaces_of
 from minippo.errors import ConfigError, MinippoError, NonFiniteError
 from minippo.normalization import ObservationNormalizer, RewardScaler
 from minippo.optimizer import Adam, clip_grad_norm, linear_schedule
@@ -66,7 +66,7 @@ COUNTS = ("update", "step", "episodes")  # the integer columns of progress.csv
 class Config:
     """Defaults are the paper's MuJoCo settings (Table 3) and the "37 details" (Huang et al. 2022)."""
 
-    env_id: str = "Hopper-v5"  # any Gymnasium id with flat Box observations and Discrete or Box actions
+    env_id: str = "Hopper-v5"  # any Gymnasium id with flat or image (H, W, C) Box observations, Discrete or Box actions
     total_steps: int = 1_000_000  # environment steps in all (the paper: 1M for MuJoCo)
     seed: int = 1  # seeds the initialisation, the action noise, the minibatch order and the environments
     objective: str = "clip"  # clip (eq. 7) | cpi (eq. 6, no clipping or penalty) | klpen (eq. 8) | pg (eq. 2)
@@ -78,6 +78,7 @@ class Config:
     gamma: float = 0.99  # γ
     gae_lambda: float = 0.95  # λ
     clip_epsilon: float = 0.2  # ε
+    anneal_clip: bool = False  # ε falls linearly to 0 with the step size α (the paper's Atari setting, Table 5)
     # eq. 8: the KL penalty (objective = klpen)
     kl_beta: float = 1.0  # β, its initial value
     kl_target: float = 0.01  # d_targ
@@ -87,6 +88,7 @@ class Config:
     entropy_coef: float = 0.0  # c2 (the paper uses none for MuJoCo)
     shared_network: bool = False  # one tanh trunk, a policy head and a value head
     hidden_sizes: tuple = (64, 64)  # two tanh layers of 64, for the policy and for the value network
+    network: str = "mlp"  # mlp (tanh layers of hidden_sizes) | minatar_cnn (images: conv 16 3×3, dense 128, shared)
     dtype: str = "float32"  # the networks' floats: float32 or float64 (the gradient checks use float64)
     log_std_init: float = 0.0  # the Gaussian policy starts with σ = e^0 = 1 for every action
     # the implementation details, each a switch
@@ -133,6 +135,9 @@ class Config:
         for name in ("gamma", "gae_lambda"):
             check(0 <= getattr(self, name) <= 1, name, f"must lie in [0, 1], not {getattr(self, name)}")
         check(self.dtype in ("float32", "float64"), "dtype", f"must be float32 or float64, not {self.dtype}")
+        check(self.network in NETWORKS, "network", f"must be one of {', '.join(NETWORKS)}, not '{self.network}'")
+        check(self.network == "mlp" or self.shared_network, "shared_network",
+              f"must be true with network={self.network}, whose one trunk feeds both heads")  # fmt: skip
         for name in ("clip_epsilon", "lr"):
             check(getattr(self, name) > 0, name, f"must be positive, not {getattr(self, name)}")
         return self
@@ -313,6 +318,8 @@ class Trainer:
         self.rng = np.random.default_rng(config.seed)
         self.envs = [make_env(config.env_id) for _ in range(config.num_envs)]
         obs_dim, kind, act_dim = spaces_of(self.envs[0])
+        if config.network != "mlp" and image_shape_of(self.envs[0]) is None:
+            raise ConfigError("network", f"network={config.network} needs image observations; {config.env_id} has none")
         self.agent = ActorCritic(
             obs_dim,
             kind,
@@ -323,6 +330,8 @@ class Trainer:
             config.orthogonal_init,
             self.rng,
             config.dtype,
+            config.network,
+            image_shape_of(self.envs[0]),
         )
         self.optimizer = Adam(self.agent.params, lr=config.lr, eps=config.adam_eps)
         self.obs_normalizer = ObservationNormalizer((obs_dim,), config.obs_clip, config.normalize_observations)
@@ -349,6 +358,10 @@ class Trainer:
         self.update += 1
         lr = linear_schedule(config.lr, self.update, config.num_updates) if config.anneal_lr else config.lr
         self.optimizer.lr = lr
+        if config.anneal_clip:  # ε·α with the same α as the step size (Table 5); the value clip follows it
+            config = dataclasses.replace(
+                config, clip_epsilon=linear_schedule(config.clip_epsilon, self.update, config.num_updates)
+            )
 
         batch = self.rollout.collect()  # run π_θold for T timesteps
         advantages, returns = compute_advantages(batch, config)  # Â_1 … Â_T

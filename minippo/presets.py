@@ -1,4 +1,4 @@
-"""Named settings of ``Config``: the paper's MuJoCo settings, and the course's two CartPole settings.
+"""Named settings of ``Config``: the paper's MuJoCo and Atari settings, A2C, and the course's two CartPole settings.
 
 Each is a dict of Config fields: ``Config(**CARTPOLE_PPO, seed=3)``.
 """
@@ -33,3 +33,68 @@ CARTPOLE_PPO = dict(
     clip_value_loss=False,
     lr=2.5e-4,
 )
+
+# The paper's Table 5 (Atari): N = 8 actors, T = 128, K = 3 epochs, minibatches of 32 × 8 = 256, step size 2.5e-4 × α
+# and ε = 0.1 × α with α falling linearly from 1 to 0, c1 = 1, c2 = 0.01, γ = 0.99, λ = 0.95; one network with a
+# policy and a value head (eq. 9). The network is MinAtar's (conv 16 3×3, dense 128) instead of the paper's Atari one
+# (Mnih et al. 2015's three convolutions on 84 × 84 frames). A 10 × 10 grid of booleans needs no observation
+# normalisation, and MinAtar's rewards are small counts (the paper clips Atari's to their sign), so neither is scaled.
+ATARI = dict(
+    num_envs=8,
+    horizon=128,
+    epochs=3,
+    minibatch_size=256,
+    lr=2.5e-4,
+    anneal_lr=True,
+    clip_epsilon=0.1,
+    anneal_clip=True,
+    gamma=0.99,
+    gae_lambda=0.95,
+    value_coef=1.0,
+    entropy_coef=0.01,
+    network="minatar_cnn",
+    shared_network=True,
+    normalize_observations=False,
+    scale_rewards=False,
+)
+
+# A2C (Mnih et al. 2016, synchronous), the paper's Atari baseline, from minippo's pieces: the L^PG objective (eq. 2)
+# with one gradient step on each batch of N = 16 actors × T = 5 steps, n-step advantages (GAE with λ = 1 is the
+# bootstrapped n-step return minus V), c1 = 0.5, c2 = 0.01, step size 7e-4 falling to 0, gradient norm clipped at 0.5,
+# no advantage normalisation, no value clipping, on the same network and observations as ATARI. Where it differs
+# from A2C as usually run: Adam (ε = 1e-5) instead of RMSProp, since minippo has only Adam.
+A2C = dict(
+    ATARI,
+    objective="pg",
+    num_envs=16,
+    horizon=5,
+    epochs=1,
+    minibatch_size=80,
+    lr=7e-4,
+    anneal_clip=False,
+    gae_lambda=1.0,
+    value_coef=0.5,
+    shuffle_minibatches=False,
+    normalize_advantages=False,
+    clip_value_loss=False,
+)
+
+# the names ``minippo train --preset`` and ``minippo sweep --preset`` know
+PRESETS = {"atari": ATARI, "a2c": A2C, "mujoco": MUJOCO}
+
+
+def preset_overrides(name: str) -> list[str]:
+    """A preset as the KEY=VALUE texts of ``--config``, so that a command's own --config can still override it."""
+    if name not in PRESETS:
+        raise KeyError(name)
+    texts = []
+    for key, value in PRESETS[name].items():
+        text = (
+            ",".join(map(str, value))
+            if isinstance(value, tuple)
+            else str(value).lower()
+            if isinstance(value, bool)
+            else str(value)
+        )
+        texts.append(f"{key}={text}")
+    return texts

@@ -390,3 +390,40 @@ def test_the_one_commit_rerun_reproduces_table1s_default_runs():
     shared = [(row, rerun[(row["env"], row["seed"])]) for row in table if (row["env"], row["seed"]) in rerun]
     assert len(shared) >= 12 and len({row["commit"] for _, row in shared}) == 1
     assert all(old["return_mean"] == new["return_mean"] for old, new in shared)
+
+
+# the MinAtar campaign
+
+
+def test_minatar_sweep_runs_each_game_with_both_presets():
+    from benchmarks import minatar
+
+    runs = minatar.sweep_runs(["PPO", "A2C"], ["MinAtar/Breakout-v1"], [1, 2], 20_480)
+    assert [run.labels["algorithm"] for run in runs] == ["PPO", "A2C", "PPO", "A2C"]
+    ppo, a2c = runs[0].config, runs[1].config
+    assert (ppo.objective, ppo.num_envs, ppo.horizon, ppo.epochs, ppo.anneal_clip) == ("clip", 8, 128, 3, True)
+    assert (a2c.objective, a2c.epochs, a2c.minibatch_size) == ("pg", 1, a2c.num_envs * a2c.horizon)
+    assert runs[0].command("runs").endswith("--quiet --preset atari") and "Breakout-v1" in runs[0].name
+
+
+def test_minatar_table_scores_both_ways_and_counts_wins(tmp_path):
+    from benchmarks import minatar
+
+    def fake(algorithm, seed, returns):
+        folder = tmp_path / "runs" / minatar.run_name(algorithm, "MinAtar/Breakout-v1", seed)
+        folder.mkdir(parents=True)
+        np.savez(folder / "checkpoint.npz", returns=np.array(returns, float), lengths=np.ones(len(returns), int))
+        minatar.write_episodes(folder)
+        return {"algorithm": algorithm, "env": "MinAtar/Breakout-v1", "seed": seed}
+
+    # PPO ahead over all of training (mean 2 against 1.75), A2C over the last 100 episodes (3.5 against 3)
+    rows = [fake("PPO", 1, [1.0] * 100 + [3.0] * 100), fake("A2C", 1, [0.0] * 100 + [3.5] * 100)]
+    write_csv(tmp_path / "runs.csv", rows)
+    table = minatar.write_table(
+        tmp_path / "runs.csv", tmp_path / "runs", tmp_path / "t.csv", ["MinAtar/Breakout-v1"], [1]
+    )
+    row = table[0]
+    assert (row["PPO_all_training"], row["PPO_last_100"]) == (2.0, 3.0)
+    assert (row["A2C_all_training"], row["A2C_last_100"]) == (1.75, 3.5)
+    assert (row["winner_all_training"], row["winner_last_100"]) == ("PPO", "A2C")
+    assert read_rows(tmp_path / "t.csv")[0]["winner_last_100"] == "A2C"

@@ -1,0 +1,139 @@
+"""The paper's Atari comparison (its Table 2) in miniature: PPO against A2C on MinAtar's five games.
+
+    python -m benchmarks.minatar --steps N       # every (algorithm, game, seed) not yet recorded, then the table
+    python -m benchmarks.minatar --score         # only recompute benchmarks/results/minatar.csv from the records
+
+PPO runs with the paper's Atari settings (``--preset atari``, its Table 5), A2C with ``--preset a2c``; both on the
+same convolutional network (minippo/presets.py says where each differs from the paper). The paper scores Atari two
+ways: the mean episode return over all of training, and the mean over the last 100 episodes; a game is won by the
+algorithm with the higher mean over seeds. Each run's episode returns are written to ``episodes.csv`` in its folder
+(from its final checkpoint), so both scores can be recomputed from committed files.
+
+--steps has no default: choose it so that 5 games × 3 seeds × 2 algorithms fit the time you have, from the measured
+speed (benchmarks/speed.py --minatar): steps = hours × 3600 × workers × steps/s / 30.
+
+Each run is what ``minippo train ENV --steps N --seed S --out benchmarks/runs/minatar/<alg>-ENV-seedS --quiet
+--preset <alg>`` runs, as a Ray task of one CPU, recorded in benchmarks/results/minatar_runs.csv; recorded runs are
+skipped, so the same command resumes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks import common
+from minippo.errors import MinippoError
+from minippo.records import read_rows
+
+GAMES = [f"MinAtar/{game}-v1" for game in ("Asterix", "Breakout", "Freeway", "Seaquest", "SpaceInvaders")]
+ALGORITHMS = {"PPO": "atari", "A2C": "a2c"}  # name: preset
+SEEDS = [1, 2, 3]
+RUN_FIELDS = ["algorithm", "env", "seed", "steps", "return_mean", "wall_s", "steps_per_s", "commit", "command"]
+RUNS_CSV = common.RESULTS / "minatar_runs.csv"
+TABLE_CSV = common.RESULTS / "minatar.csv"
+RUN_ROOT = common.RUNS / "minatar"
+
+
+def run_name(algorithm: str, env_id: str, seed: int) -> str:
+    return f"{algorithm.lower()}-{env_id.replace('/', '-')}-seed{seed}"
+
+
+def sweep_runs(algorithms, envs, seeds, steps) -> list:
+    """Game by game (so that a partial table covers whole games), then seed, then algorithm."""
+    from minippo.ppo import Config
+    from minippo.presets import PRESETS
+    from minippo.sweep import Run
+
+    runs = []
+    for env_id in envs:
+        for seed in seeds:
+            for algorithm in algorithms:
+                preset = ALGORITHMS[algorithm]
+                config = Config(env_id=env_id, total_steps=steps, seed=seed, **PRESETS[preset]).validate()
+                labels = {"algorithm": algorithm, "env": env_id, "seed": seed}
+                runs.append(Run(run_name(algorithm, env_id, seed), config, labels, ["--preset", preset]))
+    return runs
+
+
+def write_episodes(run_dir: Path) -> None:
+    """episodes.csv (return, length of every finished episode, in order) from the run's final checkpoint."""
+    target = run_dir / "episodes.csv"
+    if target.exists() or not (run_dir / "checkpoint.npz").exists():
+        return
+    with np.load(run_dir / "checkpoint.npz", allow_pickle=False) as data:
+        returns, lengths = data["returns"], data["lengths"]
+    with open(target, "w", newline="") as handle:
+        writer = csv.writer(handle, lineterminator="\n")
+        writer.writerow(["return", "length"])
+        writer.writerows((f"{r:g}", int(n)) for r, n in zip(returns, lengths))
+
+
+def scores(run_dir: Path) -> tuple[float, float]:
+    """(mean return over all of training, mean over the last 100 episodes) of one run."""
+    returns = [float(row["return"]) for row in read_rows(run_dir / "episodes.csv")]
+    if not returns:
+        raise common.BenchmarkError(f"no finished episode in {common.relative(run_dir)}")
+    return float(np.mean(returns)), float(np.mean(returns[-100:]))
+
+
+def write_table(runs_csv, root, table_csv, envs, seeds) -> list[dict]:
+    """Per game, each algorithm's mean over seeds of both scores, and the winner under each rule."""
+    recorded = {(row["algorithm"], row["env"], int(row["seed"])) for row in read_rows(runs_csv)}
+    table = []
+    for env_id in envs:
+        row = {"env": env_id}
+        for algorithm in ALGORITHMS:
+            done = [seed for seed in seeds if (algorithm, env_id, seed) in recorded]
+            both = np.array([scores(Path(root) / run_name(algorithm, env_id, seed)) for seed in done]).reshape(-1, 2)
+            row[f"{algorithm}_all_training"] = round(float(both[:, 0].mean()), 3) if len(both) else float("nan")
+            row[f"{algorithm}_last_100"] = round(float(both[:, 1].mean()), 3) if len(both) else float("nan")
+            row[f"{algorithm}_seeds"] = len(done)
+        for rule in ("all_training", "last_100"):
+            ppo, a2c = row[f"PPO_{rule}"], row[f"A2C_{rule}"]
+            row[f"winner_{rule}"] = "" if np.isnan(ppo) or np.isnan(a2c) else "PPO" if ppo > a2c else "A2C"
+        table.append(row)
+    with open(table_csv, "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(table[0]), lineterminator="\n")
+        writer.writeheader()
+        writer.writerows(table)
+    return table
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--envs", nargs="+", default=GAMES, metavar="ENV")
+    parser.add_argument("--seeds", nargs="+", type=int, default=SEEDS)
+    parser.add_argument("--algorithms", nargs="+", choices=list(ALGORITHMS), default=list(ALGORITHMS))
+    parser.add_argument("--steps", type=int, help="environment steps per run (required unless --score)")
+    parser.add_argument("--score", action="store_true", help="only rewrite minatar.csv from the recorded runs")
+    parser.add_argument("--runs-csv", default=str(RUNS_CSV))
+    parser.add_argument("--table-csv", default=str(TABLE_CSV))
+    parser.add_argument("--runs", default=str(RUN_ROOT), help="the folder of run folders")
+    common.add_sweep_options(parser)
+    args = parser.parse_args(argv)
+    if not args.score and (args.steps is None or args.steps < 1024):
+        common.fail("--steps is required, at least one PPO batch (8 × 128 = 1024 steps)")
+    code = 0
+    try:
+        if not args.score:
+            runs = sweep_runs(args.algorithms, args.envs, args.seeds, args.steps)
+            code = common.run_sweep(runs, args.runs, args.runs_csv, RUN_FIELDS, args)
+            if code == 130:
+                return code
+        for run_dir in sorted(Path(args.runs).glob("*-MinAtar-*")):
+            write_episodes(run_dir)
+        table = write_table(args.runs_csv, args.runs, args.table_csv, args.envs, args.seeds)
+    except (common.BenchmarkError, MinippoError) as error:
+        common.fail(str(error))
+    for rule in ("all_training", "last_100"):
+        won = sum(row[f"winner_{rule}"] == "PPO" for row in table)
+        print(f"{rule}: PPO wins {won} of {sum(bool(row[f'winner_{rule}']) for row in table)} games")
+    return code
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

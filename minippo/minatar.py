@@ -1,0 +1,79 @@
+"""MinAtar (Young & Tian 2019) through Gymnasium: five Atari games on a 10 × 10 grid, as ``MinAtar/<Game>-v1``.
+
+The observation is the game's state as MinAtar keeps it, a (10, 10, C) boolean image with one channel per kind of
+object (C = 4 for Breakout, up to 10 for Seaquest); the actions are each game's minimal set (3 for Breakout, up to 6).
+Sticky actions (the last action repeats with probability 0.1) and the difficulty ramp stay on, MinAtar's defaults.
+
+``minatar`` is an optional dependency (``pip install 'minippo[minatar]'``); the games are registered the first time
+minippo is asked for a ``MinAtar/`` id.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+
+import gymnasium as gym
+import numpy as np
+
+from minippo.errors import MinippoError
+
+GAMES = {  # Gymnasium name: MinAtar's module name
+    "Asterix": "asterix",
+    "Breakout": "breakout",
+    "Freeway": "freeway",
+    "Seaquest": "seaquest",
+    "SpaceInvaders": "space_invaders",
+}
+# Gymnasium's Atari games end an episode at 108,000 frames, 27,000 agent steps; MinAtar has no limit of its own, and an
+# agent that never loses would otherwise never finish an evaluation episode.
+MAX_EPISODE_STEPS = 27_000
+CELL_PIXELS = 16  # each grid cell drawn as a 16 × 16 square by render()
+
+
+class MinAtarEnv(gym.Env):
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 15}
+
+    def __init__(self, game: str, sticky_action_prob: float = 0.1, difficulty_ramping: bool = True, render_mode=None):
+        from minatar import Environment
+
+        self.game = Environment(game, sticky_action_prob=sticky_action_prob, difficulty_ramping=difficulty_ramping)
+        self.actions = list(self.game.minimal_action_set())  # our action i is MinAtar's action actions[i]
+        self.action_space = gym.spaces.Discrete(len(self.actions))
+        self.observation_space = gym.spaces.Box(0, 1, shape=tuple(self.game.state_shape()), dtype=bool)
+        self.render_mode = render_mode
+        self.game.seed(int(np.random.SeedSequence().generate_state(1)[0]))  # unseeded: fresh entropy, like Gymnasium
+
+    def reset(self, *, seed: int | None = None, options=None):
+        super().reset(seed=seed)
+        if seed is not None:  # one generator drives the game and its sticky actions: seeding it fixes the episode
+            self.game.seed(seed)
+        self.game.last_action = 0  # an episode starts with no action to repeat, whatever the last one did
+        self.game.reset()
+        return self.game.state(), {}
+
+    def step(self, action):
+        reward, terminal = self.game.act(self.actions[int(action)])
+        return self.game.state(), float(reward), bool(terminal), False, {}
+
+    def render(self):
+        """The grid as an RGB image, one colour per channel (a later channel paints over an earlier one)."""
+        if self.render_mode != "rgb_array":
+            return None
+        import matplotlib
+
+        state = self.game.state()
+        colours = np.asarray(matplotlib.colormaps["tab10"].colors)[: state.shape[-1]]
+        image = np.zeros((*state.shape[:2], 3), dtype=np.uint8)
+        for channel, colour in enumerate(colours):
+            image[state[:, :, channel]] = np.round(255 * colour)
+        return image.repeat(CELL_PIXELS, axis=0).repeat(CELL_PIXELS, axis=1)
+
+
+def register_games() -> None:
+    """Register ``MinAtar/<Game>-v1`` for the five games (once), or say how to install MinAtar."""
+    if importlib.util.find_spec("minatar") is None:
+        raise MinippoError("the MinAtar games need the minatar package: pip install 'minippo[minatar]'")
+    for name, game in GAMES.items():
+        env_id = f"MinAtar/{name}-v1"
+        if env_id not in gym.registry:
+            gym.register(env_id, entry_point=MinAtarEnv, kwargs={"game": game}, max_episode_steps=MAX_EPISODE_STEPS)
