@@ -134,16 +134,21 @@ def summarize(env_id: str, rounds: dict[str, list[float]], steps: dict[str, int]
     return rows
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--env", default="Hopper-v5")
+def parser_for(description: str, env_id: str, updates: int, csv_path) -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--env", default=env_id)
     parser.add_argument("--rounds", type=int, default=5)
-    parser.add_argument("--updates", type=int, default=3, help="timed updates per round for each trainer")
+    parser.add_argument("--updates", type=int, default=updates, help="timed updates per round for each trainer")
     parser.add_argument("--raw-steps", type=int, default=20_000, help="random steps per round for raw stepping")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--no-sb3", action="store_true", help="leave Stable-Baselines3 out even if installed")
-    parser.add_argument("--csv", default=str(CSV_PATH))
-    args = parser.parse_args(argv)
+    parser.add_argument("--csv", default=str(csv_path))
+    return parser
+
+
+def race(args, command: str, minippo_contender, sb3_contender) -> int:
+    """Interleaved rounds of raw stepping and the two trainers (made by the two contender classes), the medians
+    written to ``args.csv`` with the machine, the load, the commit and ``command``."""
     if args.rounds < 1 or args.updates < 1 or args.raw_steps < 1:
         common.fail("--rounds, --updates and --raw-steps must be positive")
     import gymnasium as gym
@@ -156,13 +161,13 @@ def main(argv=None) -> int:
     load_before = os.getloadavg()[0]
     versions = {
         "raw": f"gymnasium {gym.__version__}",
-        "minippo": f"minippo {getattr(minippo, '__version__', '?')}, numpy {np.__version__}",
+        "minippo": f"minippo {minippo.__version__}, numpy {np.__version__}",
     }
-    contenders = {"minippo": MinippoContender(args.env, args.seed)}
+    contenders = {"minippo": minippo_contender(args.env, args.seed)}
     sb3 = None if args.no_sb3 else sb3_version()
     if sb3:
         versions["sb3"] = sb3
-        contenders["sb3"] = StableBaselinesContender(args.env, args.seed)
+        contenders["sb3"] = sb3_contender(args.env, args.seed)
     else:
         versions["sb3"] = "skipped: " + ("--no-sb3" if args.no_sb3 else "stable-baselines3 is not installed")
     rounds: dict[str, list[float]] = {name: [] for name in ("raw", "minippo", "sb3")}
@@ -172,13 +177,9 @@ def main(argv=None) -> int:
         for name, contender in contenders.items():
             speed, steps[name] = contender.measure(args.updates)
             rounds[name].append(speed)
-        print(
-            f"round {number}: " + ", ".join(f"{name} {values[-1]:.0f}" for name, values in rounds.items() if values),
-            "steps/s",
-            flush=True,
-        )
+        shown = ", ".join(f"{name} {values[-1]:.0f}" for name, values in rounds.items() if values)
+        print(f"round {number}: {shown} steps/s", flush=True)
     rows = summarize(args.env, rounds, steps, versions)
-    command = "python -m benchmarks.speed " + shlex.join(argv if argv is not None else sys.argv[1:])
     extra = {
         "load_before": round(load_before, 2),
         "load_after": round(os.getloadavg()[0], 2),
@@ -194,11 +195,15 @@ def main(argv=None) -> int:
         writer.writeheader()
         writer.writerows({**row, **extra} for row in rows)
     for row in rows:
-        print(
-            f"{row['contender']:<8} {row['steps_per_s']!s:>9} steps/s   vs raw {row['vs_raw']!s:>6}   "
-            f"vs sb3 {row['vs_sb3']!s:>6}   {row['version']}"
-        )
+        print(f"{row['contender']:<8} {row['steps_per_s']!s:>9} steps/s   vs raw {row['vs_raw']!s:>6}   "
+              f"vs sb3 {row['vs_sb3']!s:>6}   {row['version']}")  # fmt: skip
     return 0
+
+
+def main(argv=None) -> int:
+    args = parser_for(__doc__.split("\n\n")[0], "Hopper-v5", 3, CSV_PATH).parse_args(argv)
+    command = "python -m benchmarks.speed " + shlex.join(argv if argv is not None else sys.argv[1:])
+    return race(args, command, MinippoContender, StableBaselinesContender)
 
 
 if __name__ == "__main__":

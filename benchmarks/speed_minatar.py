@@ -17,16 +17,12 @@ import os
 for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_name] = "1"  # before NumPy (and torch) start their thread pools
 
-import argparse  # noqa: E402
-import csv  # noqa: E402
-import platform  # noqa: E402
 import shlex  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
-from pathlib import Path  # noqa: E402
 
 from benchmarks import common  # noqa: E402
-from benchmarks.speed import FIELDS, raw_stepping, sb3_version, summarize  # noqa: E402
+from benchmarks.speed import parser_for, race  # noqa: E402
 
 CSV_PATH = common.RESULTS / "speed_minatar.csv"
 
@@ -113,72 +109,17 @@ class StableBaselinesContender:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--env", default="MinAtar/Breakout-v1")
-    parser.add_argument("--rounds", type=int, default=5)
-    parser.add_argument("--updates", type=int, default=5, help="timed updates (8 × 128 steps) per round and trainer")
-    parser.add_argument("--raw-steps", type=int, default=20_000, help="random steps per round for raw stepping")
-    parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--no-sb3", action="store_true", help="leave Stable-Baselines3 out even if installed")
-    parser.add_argument("--csv", default=str(CSV_PATH))
-    args = parser.parse_args(argv)
-    if args.rounds < 1 or args.updates < 1 or args.raw_steps < 1:
-        common.fail("--rounds, --updates and --raw-steps must be positive")
-    import gymnasium as gym
-    import numpy as np
-
-    import minippo
     from minippo.errors import MinippoError
     from minippo.minatar import register_games
 
+    parser = parser_for(__doc__.split("\n\n")[0], "MinAtar/Breakout-v1", 5, CSV_PATH)
+    args = parser.parse_args(argv)
     try:
         register_games()
     except MinippoError as error:
         common.fail(str(error))
-    if args.env not in gym.registry:
-        common.fail(f"unknown environment id '{args.env}'")
-    load_before = os.getloadavg()[0]
-    versions = {
-        "raw": f"gymnasium {gym.__version__}",
-        "minippo": f"minippo {minippo.__version__}, numpy {np.__version__}",
-    }
-    contenders = {"minippo": MinippoContender(args.env, args.seed)}
-    sb3 = None if args.no_sb3 else sb3_version()
-    if sb3:
-        versions["sb3"] = sb3
-        contenders["sb3"] = StableBaselinesContender(args.env, args.seed)
-    else:
-        versions["sb3"] = "skipped: " + ("--no-sb3" if args.no_sb3 else "stable-baselines3 is not installed")
-    rounds: dict[str, list[float]] = {name: [] for name in ("raw", "minippo", "sb3")}
-    steps: dict[str, int] = {"raw": args.raw_steps}
-    for number in range(1, args.rounds + 1):
-        rounds["raw"].append(raw_stepping(args.env, args.raw_steps, args.seed + number))
-        for name, contender in contenders.items():
-            speed, steps[name] = contender.measure(args.updates)
-            rounds[name].append(speed)
-        shown = ", ".join(f"{name} {values[-1]:.0f}" for name, values in rounds.items() if values)
-        print(f"round {number}: {shown} steps/s", flush=True)
-    rows = summarize(args.env, rounds, steps, versions)
-    extra = {
-        "load_before": round(load_before, 2),
-        "load_after": round(os.getloadavg()[0], 2),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
-        "date": time.strftime("%Y-%m-%d %H:%M"),
-        "commit": common.git_commit(),
-        "command": "python -m benchmarks.speed_minatar " + shlex.join(argv if argv is not None else sys.argv[1:]),
-    }
-    path = Path(args.csv)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="") as handle:  # one race per file: all its numbers come from the same run
-        writer = csv.DictWriter(handle, fieldnames=FIELDS, lineterminator="\n")
-        writer.writeheader()
-        writer.writerows(
-            {**row, **{k: v.strip() if isinstance(v, str) else v for k, v in extra.items()}} for row in rows
-        )
-    for row in rows:
-        print(f"{row['contender']:<8} {row['steps_per_s']!s:>9} steps/s   vs raw {row['vs_raw']!s:>6}   "
-              f"vs sb3 {row['vs_sb3']!s:>6}   {row['version']}")  # fmt: skip
-    return 0
+    command = "python -m benchmarks.speed_minatar " + shlex.join(argv if argv is not None else sys.argv[1:])
+    return race(args, command, MinippoContender, StableBaselinesContender)
 
 
 if __name__ == "__main__":
