@@ -46,8 +46,9 @@ def run_grade(*args, impl=None, timeout=300):
         ("everything-together", 10),
         ("CH07", 7),
         ("11", 11),
-        ("language-model", 12),
-        ("ch12", 12),
+        ("language-model", 13),
+        ("ch13", 13),
+        ("grpo-dpo", 14),
     ],
 )
 def test_chapter_names(text, number):

@@ -29,8 +29,8 @@ from solutions import (
     ch08_shared_network,
     ch09_kl_penalty,
     ch10_ppo_update,
-    ch12_language_model,
-    ch13_grpo_dpo,
+    ch13_language_model,
+    ch14_grpo_dpo,
 )
 
 pytestmark = pytest.mark.timeout(60)
@@ -222,11 +222,11 @@ def test_ppo_loss_and_update(seed, kind):
 def test_language_model(seed):
     rng = np.random.default_rng(seed)
     preferred, rejected = rng.normal(0, 3, 9), rng.normal(0, 3, 9)
-    same(ch12_language_model.bradley_terry_loss(preferred, rejected), bradley_terry_loss(preferred, rejected))
+    same(ch13_language_model.bradley_terry_loss(preferred, rejected), bradley_terry_loss(preferred, rejected))
     logp, logp_ref = rng.normal(-1.5, 0.5, (4, 6)), rng.normal(-1.5, 0.5, (4, 6))
     scores, lengths = rng.normal(size=4), rng.integers(1, 7, 4)
     same(
-        ch12_language_model.kl_shaped_rewards(logp, logp_ref, scores, lengths, 0.4),
+        ch13_language_model.kl_shaped_rewards(logp, logp_ref, scores, lengths, 0.4),
         kl_shaped_rewards(logp, logp_ref, scores, lengths, 0.4),
     )
 
@@ -236,6 +236,6 @@ def test_grpo_and_dpo(seed):
     rng = np.random.default_rng(seed)
     scores = rng.normal(size=(5, 6))
     scores[0] = 1.5  # a group that all scored the same
-    same(ch13_grpo_dpo.grpo_advantages(scores), group_advantages(scores))
+    same(ch14_grpo_dpo.grpo_advantages(scores), group_advantages(scores))
     logps = [rng.normal(-6.0, 2.0, 8) for _ in range(4)]
-    same(ch13_grpo_dpo.dpo_loss(*logps, 0.4), dpo_loss(*logps, 0.4))
+    same(ch14_grpo_dpo.dpo_loss(*logps, 0.4), dpo_loss(*logps, 0.4))

@@ -1,4 +1,4 @@
-"""Other correct ways to write chapter 13."""
+"""Other correct ways to write chapter 14."""
 
 import numpy as np
 

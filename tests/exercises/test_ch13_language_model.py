@@ -1,4 +1,4 @@
-"""Grading chapter 12: the Bradley–Terry loss (against the likelihood written out, finite differences, huge margins,
+"""Grading chapter 13: the Bradley–Terry loss (against the likelihood written out, finite differences, huge margins,
 and the fact that it is minimised by the true preference probabilities), and the KL-shaped rewards (by hand, and
 their sum over a sequence equal to R(x) − β Σ_t log π/π_ref)."""
 

@@ -1,8 +1,8 @@
-"""Chapter 13: GRPO and DPO beside PPO. Two pieces that are new in PPO's descendants: GRPO's advantages, measured
+"""Chapter 14: GRPO and DPO beside PPO. Two pieces that are new in PPO's descendants: GRPO's advantages, measured
 within the group of responses to one prompt, and DPO's loss, the Bradley–Terry loss on the implicit reward
 β log π_θ(y|x)/π_ref(y|x), with its gradient with respect to the policy's sequence log-probabilities.
 
-Grade: ``minippo grade 13``
+Grade: ``minippo grade 14``
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Grading chapter 13: GRPO's group-relative advantages (by hand, within each group and not over the batch, a group
+"""Grading chapter 14: GRPO's group-relative advantages (by hand, within each group and not over the batch, a group
 of equal scores, the population standard deviation) and the DPO loss (against the likelihood written out, finite
 differences, β in both the value and the gradient, the reference's log-probabilities, huge margins)."""
 

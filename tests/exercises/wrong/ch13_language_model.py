@@ -1,4 +1,4 @@
-"""Plausible mistakes in chapter 12: the Bradley–Terry loss and its gradient, and the KL-shaped per-token reward."""
+"""Plausible mistakes in chapter 13: the Bradley–Terry loss and its gradient, and the KL-shaped per-token reward."""
 
 import numpy as np
 

@@ -1,4 +1,4 @@
-"""Plausible mistakes in chapter 13: GRPO's group-relative advantages and the DPO loss with its gradient."""
+"""Plausible mistakes in chapter 14: GRPO's group-relative advantages and the DPO loss with its gradient."""
 
 import numpy as np
 
