@@ -50,11 +50,14 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if args.episodes < 1:
         common.fail(f"--episodes must be at least 1, not {args.episodes}")
-    import gymnasium as gym
+    from minippo.envs import check_env_id
+    from minippo.errors import MinippoError
 
     for env_id in args.envs:
-        if env_id not in gym.registry:
-            common.fail(f"unknown environment id '{env_id}'")
+        try:
+            check_env_id(env_id)  # registers the MinAtar games when asked for one
+        except MinippoError as error:
+            common.fail(str(error))
     for env_id in args.envs:
         key = {"env": env_id, "episodes": args.episodes, "seed": args.seed}
         if any(all(row[k] == str(v) for k, v in key.items()) for row in read_rows(args.csv)):
