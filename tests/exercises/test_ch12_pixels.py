@@ -75,7 +75,8 @@ def shape_mistake(got: tuple, x_shape: tuple, K_shape: tuple) -> str:
             words.append(f"its {side} is the image's, {size}: there is no padding, and {valid} = {expected[axis]}")
         elif abs(extra) == 1:
             too = "large" if extra > 0 else "small"
-            words.append(f"the output is one too {too} in {side}: {valid} = {expected[axis]} (the kernel fits there)")
+            fits = f"the {expected[axis]} positions where the kernel fits"
+            words.append(f"the output is one too {too} in {side}: {valid} = {expected[axis]}, {fits}")
     if got[0] != n:
         words.append(f"one output per image: the batch has n = {n}")
     if got[3] != F:
