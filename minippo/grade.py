@@ -68,6 +68,7 @@ BOOK_NAMES = {
     9: "kl-penalty",
     10: "everything-together",
     11: "mujoco",
+    12: "pixels",
     13: "language-model",
 }
 

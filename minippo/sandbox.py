@@ -74,6 +74,7 @@ LIBRARY_ANSWERS = {
     "ch09_kl_penalty": {"minippo.losses": ["kl_penalty_objective", "adaptive_beta"],
                         "minippo.distributions": ["Categorical"]},
     "ch10_ppo_update": {"minippo.ppo": ["loss_and_grad", "update_minibatch", "Trainer", "train"]},
+    "ch12_pixels": {"minippo.conv": ["conv2d_forward", "conv2d_backward"]},
     "ch13_language_model": {"minippo.reward_model": ["bradley_terry_loss", "RewardModel"],
                             "minippo.rlhf": ["kl_shaped_rewards", "train_rlhf"]},
 }  # fmt: skip

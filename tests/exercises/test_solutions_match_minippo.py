@@ -9,6 +9,7 @@ import pytest
 from minippo import advantages as adv
 from minippo import losses
 from minippo.agent import ActorCritic
+from minippo.conv import conv2d_backward, conv2d_forward
 from minippo.distributions import Categorical, DiagGaussian
 from minippo.dpo import dpo_loss
 from minippo.grpo import group_advantages
@@ -29,6 +30,7 @@ from solutions import (
     ch08_shared_network,
     ch09_kl_penalty,
     ch10_ppo_update,
+    ch12_pixels,
     ch13_language_model,
     ch14_grpo_dpo,
 )
@@ -216,6 +218,19 @@ def test_ppo_loss_and_update(seed, kind):
             update_minibatch(twin, twin_adam, {key: value[index] for key, value in minibatch.items()}, config)
     assert steps == config.epochs * 2
     same(agent.params, twin.params, rtol=1e-9)
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("x_shape, K_shape", [((2, 10, 10, 4), (3, 3, 4, 16)), ((3, 5, 7, 2), (2, 3, 2, 5))])
+def test_pixels(seed, x_shape, K_shape):
+    rng = np.random.default_rng(seed)
+    x, K, b = rng.normal(size=x_shape), rng.normal(size=K_shape), rng.normal(size=K_shape[-1])
+    y = conv2d_forward(x, K, b)
+    same(ch12_pixels.conv2d_forward(x, K, b), y)
+    grad_y = rng.normal(size=y.shape)
+    same(ch12_pixels.conv2d_backward(x, K, grad_y), conv2d_backward(x, K, grad_y))
+    same(ch12_pixels.conv2d_backward(x, K, grad_y, need_grad_x=False)[1:], conv2d_backward(x, K, grad_y, False)[1:])
+    assert ch12_pixels.conv2d_backward(x, K, grad_y, need_grad_x=False)[0] is None
 
 
 @pytest.mark.parametrize("seed", SEEDS)

@@ -1,0 +1,65 @@
+"""Chapter 12: pixels. The 2-D convolution under the network that plays MinAtar from its images, forward and
+backward, by hand.
+
+Images are NHWC arrays, (n, H, W, C), channels last, as MinAtar gives them; a kernel K is (kh, kw, C, F), F the
+number of filters (output channels); a bias b is (F,). The convolution is deep learning's: a cross-correlation, the
+kernel not flipped, with stride 1 and no padding ("valid"), so the output is (n, H − kh + 1, W − kw + 1, F):
+
+    y[n, i, j, f] = b[f] + Σ_{p < kh} Σ_{q < kw} Σ_{c < C} x[n, i + p, j + q, c] K[p, q, c, f].
+
+Grade: ``minippo grade 12``
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+EXERCISES = ["conv2d_forward", "conv2d_backward"]
+
+
+def conv2d_forward(x: np.ndarray, K: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The valid cross-correlation of a batch of images with F kernels, plus a bias per kernel:
+
+        y[n, i, j, f] = b[f] + Σ_{p, q, c} x[n, i + p, j + q, c] K[p, q, c, f]
+
+    for 0 ≤ i < H − kh + 1 and 0 ≤ j < W − kw + 1, the sum over 0 ≤ p < kh, 0 ≤ q < kw and every input channel c.
+
+    x: (n, H, W, C) images, channels last.  K: (kh, kw, C, F); kh ≤ H and kw ≤ W, not necessarily square.  b: (F,).
+    Returns y, (n, H − kh + 1, W − kw + 1, F) float64, a new array.
+    """
+    kh, kw, _, F = K.shape
+    n, H, W, _ = x.shape
+    out_h, out_w = H - kh + 1, W - kw + 1
+    y = np.zeros((n, out_h, out_w, F)) + b
+    for p in range(kh):
+        for q in range(kw):
+            # every output pixel's input shifted by (p, q), times the kernel's slice there: a (C, F) matrix
+            y += x[:, p : p + out_h, q : q + out_w, :] @ K[p, q]
+    return y
+
+
+def conv2d_backward(x: np.ndarray, K: np.ndarray, grad_y: np.ndarray, need_grad_x: bool = True):
+    """Given grad_y = ∂L/∂y for y = conv2d_forward(x, K, b), return (∂L/∂x, ∂L/∂K, ∂L/∂b):
+
+        ∂L/∂K[p, q, c, f] = Σ_{n, i, j} x[n, i + p, j + q, c] ∂L/∂y[n, i, j, f]
+        ∂L/∂b[f]          = Σ_{n, i, j} ∂L/∂y[n, i, j, f]
+        ∂L/∂x[n, a, e, c] = Σ_{p, q, f} ∂L/∂y[n, a − p, e − q, f] K[p, q, c, f],
+
+    the last sum over the (p, q) for which (a − p, e − q) is an output pixel: an input pixel lies in the receptive
+    field of up to kh·kw output pixels, and it receives the gradient of every one of them (they add up).
+
+    x: (n, H, W, C).  K: (kh, kw, C, F).  grad_y: (n, H − kh + 1, W − kw + 1, F).  Returns grad_x (n, H, W, C), or
+    None when need_grad_x is False (the first layer's input needs no gradient); grad_K (kh, kw, C, F); grad_b (F,);
+    all float64 and new arrays.
+    """
+    kh, kw, C, F = K.shape
+    _, out_h, out_w, _ = grad_y.shape
+    grad_K = np.zeros((kh, kw, C, F))
+    grad_x = np.zeros(x.shape) if need_grad_x else None
+    for p in range(kh):
+        for q in range(kw):
+            shifted = x[:, p : p + out_h, q : q + out_w, :]
+            grad_K[p, q] = np.einsum("nijc,nijf->cf", shifted, grad_y)
+            if need_grad_x:
+                grad_x[:, p : p + out_h, q : q + out_w, :] += grad_y @ K[p, q].T  # overlapping fields add up
+    return grad_x, grad_K, grad_y.sum(axis=(0, 1, 2))
