@@ -45,6 +45,7 @@ __all__ = [
     "central_differences",
     "corridor_rounds",
     "epochs_on_one_batch",
+    "markdown_table",
     "one_batch",
 ]
 
@@ -93,3 +94,11 @@ def corridor_rounds(settings, ticks, changes=None):
             summary["broken_at"] = record["epoch"]
         summary["end"] = record
     return rounds
+
+
+def markdown_table(header, rows) -> str:
+    """A Markdown table (for ``glue`` with ``Markdown`` and a ``{glue:md}`` directive): ``header`` a list of column
+    titles, ``rows`` lists of cells, all strings. The theme renders it as an HTML table whose columns wrap their titles,
+    so a table of a few short numbers fits a phone where a printed one would not."""
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    return "\n".join(lines + ["| " + " | ".join(row) + " |" for row in rows])

@@ -189,3 +189,26 @@ def luminance(css_color: str) -> float:
 def contrast(first: str, second: str) -> float:
     light, dark = sorted((luminance(first), luminance(second)), reverse=True)
     return (light + 0.05) / (dark + 0.05)
+
+
+TABLE_PAGES = ("13-language-model.html", "14-grpo-dpo.html")
+
+
+@pytest.mark.parametrize("page", TABLE_PAGES)
+def test_the_tables_of_the_rlhf_chapters_fit_a_phone(driver, site, page):
+    """Chapters 13 and 14 show their results as tables of a few short numbers: on a 390-pixel phone each must be
+    read whole, without scrolling sideways inside its box."""
+    open_page(driver, site + page, PHONE, mobile=True)
+    tables = driver.execute_script(
+        """
+        return [...document.querySelectorAll("article table")].map((table) => {
+            const box = table.getBoundingClientRect(), parent = table.parentElement;
+            return {first: table.innerText.slice(0, 40), right: box.right, width: table.scrollWidth,
+                    room: parent.clientWidth};
+        });
+        """
+    )
+    assert len(tables) >= 2, f"{page} shows {len(tables)} tables"
+    too_wide = [t for t in tables if t["width"] > t["room"] or t["right"] > PHONE[0]]
+    assert too_wide == [], too_wide
+    assert severe_messages(driver) == []
