@@ -23,7 +23,8 @@ class BenchmarkError(Exception):
 
 
 def fail(message: str) -> None:
-    print(f"{Path(sys.argv[0]).name}: error: {message}", file=sys.stderr)
+    program = Path(sys.argv[0])  # a runner's file, or the folder of a package's __main__.py
+    print(f"{program.parent.name if program.stem == '__main__' else program.name}: error: {message}", file=sys.stderr)
     raise SystemExit(2)
 
 
@@ -37,8 +38,9 @@ def git_commit(paths: tuple[str, ...] = ("minippo",)) -> str:
     return commit_of_code(paths, ROOT)
 
 
-def shell_text(argv: list[str]) -> str:
-    return " ".join(shlex.quote(part) for part in argv)
+def invocation(module: str, argv) -> str:
+    """The command that ran ``python -m benchmarks.MODULE`` with ``argv`` (None: this process's), as records keep it."""
+    return f"python -m benchmarks.{module} {shlex.join(sys.argv[1:] if argv is None else argv)}".strip()
 
 
 def compact_progress(run_dir, digits: int = 6) -> None:
@@ -73,10 +75,41 @@ def add_sweep_options(parser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
-def record_sweep(runs, root, record_csv, fields: list[str]) -> int:
+def check_steps(steps: int, least: int = 2048) -> None:
+    if steps < least:
+        fail(f"--steps must be at least one horizon ({least}), not {steps}")
+
+
+def label_key(runs, fields) -> list[str]:
+    """The record's columns that name a run: its labels, in the record's order."""
+    return [field for field in fields if runs and field in runs[0].labels]
+
+
+def todo(runs, record_csv, fields) -> list:
+    """The runs that ``record_csv`` does not hold yet."""
+    key = label_key(runs, fields)
+    recorded = {tuple(row[k] for k in key) for row in read_rows(record_csv)}
+    return [run for run in runs if tuple(str(run.labels[k]) for k in key) not in recorded]
+
+
+def show_list(runs, record_csv, fields, scores=("return_mean",)) -> int:
+    """``--list``: every run, recorded (with its ``scores``) or still to do."""
+    key = label_key(runs, fields)
+    done = {tuple(row[k] for k in key): row for row in read_rows(record_csv)}
+    widths = {k: max(len(str(run.labels[k])) for run in runs) for k in key}
+    for run in runs:
+        row = done.get(tuple(str(run.labels[k]) for k in key))
+        label = "  ".join(f"{run.labels[k]!s:<{widths[k]}}" for k in key)
+        shown = "".join(f"  {name.split('_')[0]} {row[name]:>9}" for name in scores) if row else ""
+        print(f"{'recorded' if row else 'to do':<8}  {label}{shown}")
+    return 0
+
+
+def record_sweep(runs, root, record_csv, fields: list[str], more=None) -> int:
     """Copy the ok rows of ``root/sweep.csv`` that ``record_csv`` lacks into it (their labels, then steps, return,
-    clock, commit and command), rounding each run's progress.csv; returns how many were added."""
-    key = [field for field in fields if field in runs[0].labels] if runs else []
+    clock, commit and command, and ``more(folder)``'s columns), rounding each run's progress.csv; returns how many
+    were added."""
+    key = label_key(runs, fields)
     by_key = {tuple(str(run.labels[k]) for k in key): run for run in runs}
     recorded = {tuple(row[k] for k in key) for row in read_rows(record_csv)}
     added = 0
@@ -84,22 +117,27 @@ def record_sweep(runs, root, record_csv, fields: list[str]) -> int:
         run = by_key.get(tuple(row[k] for k in key))
         if row["status"] != "ok" or run is None or tuple(row[k] for k in key) in recorded:
             continue
+        extra = more(Path(root) / run.name) if more else {}
         compact_progress(Path(root) / run.name)
         numbers = {"steps": int(row["steps"]), "return_mean": round(float(row["return_mean"]), 2)}
         numbers |= {"wall_s": round(float(row["wall_s"]), 1), "steps_per_s": round(float(row["steps_per_s"]), 1)}
-        append_row(record_csv, fields, {**run.labels, **numbers, "commit": row["commit"], "command": row["command"]})
+        numbers |= {**extra, "commit": row["commit"], "command": row["command"]}
+        append_row(record_csv, fields, {**run.labels, **numbers})
         recorded.add(tuple(row[k] for k in key))
         added += 1
     return added
 
 
-def run_sweep(runs, root, record_csv, fields: list[str], args) -> int:
+def run_sweep(runs, root, record_csv, fields: list[str], args, engine=None, more=None) -> int:
     """Run the ``runs`` that ``record_csv`` does not hold on minippo sweep's engine into the folder ``root`` (each
-    run, failed ones too, is logged in ``root/sweep.csv`` with the node it ran on), then record the finished ones.
-    Returns the exit code."""
+    run, failed ones too, is logged in ``root/sweep.csv`` with the node it ran on), then record the finished ones
+    (``more``: see ``record_sweep``); with ``args.list``, only show what is recorded and what is left. ``engine``: a
+    ``minippo.sweep.Sweep`` maker whose ``finish`` writes the record itself. Returns the exit code."""
     from minippo.errors import MinippoError
     from minippo.sweep import Sweep
 
+    if getattr(args, "list", False):
+        return show_list(runs, record_csv, fields)
     if args.workers is not None and args.workers < 1:
         fail(f"--workers must be at least 1, not {args.workers}")
     try:
@@ -107,17 +145,21 @@ def run_sweep(runs, root, record_csv, fields: list[str], args) -> int:
     except MinippoError as error:
         fail(str(error))
     root = relative(root)  # the commands in the records name the folder from the repository's root
-    record_sweep(runs, root, record_csv, fields)  # runs an interrupted invocation finished
-    key = [field for field in fields if runs and field in runs[0].labels]
-    recorded = {tuple(row[k] for k in key) for row in read_rows(record_csv)}
-    todo = [run for run in runs if tuple(str(run.labels[k]) for k in key) not in recorded]
-    job = Sweep(todo, root, workers=args.workers, address=args.address, retries=args.retries, quiet=args.quiet)
+    if engine is None:
+        record_sweep(runs, root, record_csv, fields, more)  # runs an interrupted invocation finished
+    left = todo(runs, record_csv, fields)
+    if not left:
+        print(f"all {len(runs)} runs are recorded in {relative(record_csv)}")
+        return 0
+    options = dict(workers=args.workers, address=args.address, retries=args.retries, quiet=args.quiet)
+    job = (engine or Sweep)(left, root, **options)
     try:
-        code = 1 if todo and job.run() else 0
+        code = 1 if job.run() else 0
     except MinippoError as error:
         fail(str(error))
     except KeyboardInterrupt:
         print(f"interrupted; {job.recorded} runs recorded; the same command continues", file=sys.stderr)
         code = 130
-    record_sweep(runs, root, record_csv, fields)
+    if engine is None:
+        record_sweep(runs, root, record_csv, fields, more)
     return code

@@ -18,7 +18,6 @@ import argparse
 
 from benchmarks import common
 from benchmarks.scoring import SEVEN_TASKS as TASKS
-from minippo.records import read_rows
 
 SEEDS = [1, 2, 3]
 STEPS = 1_000_000
@@ -52,17 +51,8 @@ def main(argv=None) -> int:
     unknown = [env_id for env_id in args.envs if env_id not in TASKS]
     if unknown:
         common.fail(f"unknown task {', '.join(unknown)}; the seven are {', '.join(TASKS)}")
-    if args.steps < 2048:
-        common.fail(f"--steps must be at least one horizon (2048), not {args.steps}")
+    common.check_steps(args.steps)
     runs = sweep_runs(args.envs, args.seeds, args.steps)
-    if args.list:
-        done = {(row["env"], row["seed"]) for row in read_rows(args.csv)}
-        for row in read_rows(args.csv):
-            print(f"recorded  {row['env']:<26} seed {row['seed']}  return {row['return_mean']:>9}")
-        for run in runs:
-            if run.key() not in done:
-                print(f"to do     {run.labels['env']:<26} seed {run.labels['seed']}")
-        return 0
     return common.run_sweep(runs, args.runs, args.csv, FIELDS, args)
 
 

@@ -205,6 +205,23 @@ def test_runners_skip_what_the_records_hold(tmp_path, stub_engine):
     assert [run.config.seed for run in stub_engine] == [1]
 
 
+def test_ablations_record_each_detail_off_with_the_last_ten_updates(tmp_path, stub_engine, monkeypatch):
+    import importlib
+
+    ablations = importlib.import_module("benchmarks.ablations.__main__")
+    monkeypatch.setattr(ablations, "HERE", tmp_path)
+    monkeypatch.setattr(ablations, "RESULTS", tmp_path / "results.csv")
+    assert ablations.main(["--only", "default", "use_gae", "--seeds", "3", "--steps", "4096", "--quiet"]) == 0
+    rows = read_rows(tmp_path / "results.csv")
+    assert list(rows[0]) == ablations.FIELDS and [row["ablation"] for row in rows] == ["default", "use_gae"]
+    assert (rows[0]["override"], rows[1]["override"]) == ("(none)", "use_gae=false")
+    assert rows[1]["return_last10"] == "15.0" and rows[1]["return_mean"] == "20.0"  # the stub's updates: 10, 20
+    assert rows[1]["command"].endswith(f"--out {tmp_path}/runs/use_gae-seed3 --quiet --config use_gae=false")
+    assert stub_engine[1].config.use_gae is False and stub_engine[0].config.use_gae is True
+    assert ablations.main(["--only", "default", "--seeds", "3", "--steps", "4096", "--quiet"]) == 0
+    assert len(stub_engine) == 2  # recorded: not run again
+
+
 def test_table1_sweep_makes_the_commands_of_its_records():
     """The runs the sweep describes are the trainings whose commands the 1M-step Table 1 records hold (the KL rows
     among the stale ones being rerun), which the earlier runner started with one BLAS thread set in the environment,
