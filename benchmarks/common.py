@@ -92,16 +92,17 @@ def todo(runs, record_csv, fields) -> list:
     return [run for run in runs if tuple(str(run.labels[k]) for k in key) not in recorded]
 
 
-def show_list(runs, record_csv, fields, scores=("return_mean",)) -> int:
-    """``--list``: every run, recorded (with its ``scores``) or still to do."""
+def show_list(runs, record_csv, fields) -> int:
+    """``--list``: every run, recorded (with its scores) or still to do."""
     key = label_key(runs, fields)
     done = {tuple(row[k] for k in key): row for row in read_rows(record_csv)}
-    widths = {k: max(len(str(run.labels[k])) for run in runs) for k in key}
-    for run in runs:
-        row = done.get(tuple(str(run.labels[k]) for k in key))
-        label = "  ".join(f"{run.labels[k]!s:<{widths[k]}}" for k in key)
-        shown = "".join(f"  {name.split('_')[0]} {row[name]:>9}" for name in scores) if row else ""
-        print(f"{'recorded' if row else 'to do':<8}  {label}{shown}")
+    shown = [{k: f"seed {run.labels[k]}" if k == "seed" else str(run.labels[k]) for k in key} for run in runs]
+    widths = {k: max(len(labels[k]) for labels in shown) for k in key}
+    for run, labels in zip(runs, shown):
+        row = done.get(tuple(str(run.labels[k]) for k in key), {})
+        label = "  ".join(f"{labels[k]:<{widths[k]}}" for k in key)
+        scores = "".join(f"  {name[:-5]} {row[name]:>9}" for name in ("return_mean", "eval_mean") if name in row)
+        print(f"{'recorded' if row else 'to do':<8}  {label}{scores}")
     return 0
 
 

@@ -83,7 +83,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if not 1 <= args.updates <= 500:
         common.fail(f"--updates must be between 1 and 500, not {args.updates}")
-    command = "python -m benchmarks.same_math " + common.shell_text(sys.argv[1:] if argv is None else argv)
+    command = common.invocation("same_math", argv)
     try:
         try:
             earlier = git("rev-parse", "--short", "--verify", "--quiet", f"{args.earlier}^{{commit}}")

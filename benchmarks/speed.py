@@ -192,8 +192,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     args.updates = args.updates or (5 if minatar(args.env) else 3)
     args.csv = args.csv or str(MINATAR_CSV_PATH if minatar(args.env) else CSV_PATH)
-    command = "python -m benchmarks.speed " + shlex.join(argv if argv is not None else sys.argv[1:])
-    if args.rounds < 1 or args.updates < 1 or args.raw_steps < 1:
+        if args.rounds < 1 or args.updates < 1 or args.raw_steps < 1:
         common.fail("--rounds, --updates and --raw-steps must be positive")
     import gymnasium as gym
     import numpy as np
@@ -237,7 +236,7 @@ def main(argv=None) -> int:
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d %H:%M"),
         "commit": common.git_commit(),
-        "command": command.strip(),
+        "command": common.invocation("speed", argv),
     }
     path = Path(args.csv)
     path.parent.mkdir(parents=True, exist_ok=True)

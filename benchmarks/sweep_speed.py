@@ -18,7 +18,6 @@ import argparse
 import csv
 import os
 import shlex
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -110,7 +109,7 @@ def main(argv=None) -> int:
         "load_before": round(load_before, 2),
         "load_after": round(os.getloadavg()[0], 2),
         "commit": commit,
-        "command": "python -m benchmarks.sweep_speed " + common.shell_text(sys.argv[1:] if argv is None else argv),
+        "command": common.invocation("sweep_speed", argv),
     }
     append_row(args.csv, FIELDS, row)
     print(
