@@ -28,9 +28,7 @@ for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import csv  # noqa: E402
 import platform  # noqa: E402
-import shlex  # noqa: E402
 import statistics  # noqa: E402
-import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -192,7 +190,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     args.updates = args.updates or (5 if minatar(args.env) else 3)
     args.csv = args.csv or str(MINATAR_CSV_PATH if minatar(args.env) else CSV_PATH)
-        if args.rounds < 1 or args.updates < 1 or args.raw_steps < 1:
+    if args.rounds < 1 or args.updates < 1 or args.raw_steps < 1:
         common.fail("--rounds, --updates and --raw-steps must be positive")
     import gymnasium as gym
     import numpy as np
