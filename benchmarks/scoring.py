@@ -18,46 +18,13 @@ from benchmarks.common import RESULTS, BenchmarkError, relative
 from minippo.records import read_rows
 
 TABLES = RESULTS / "tables"
-SEVEN_TASKS = [
-    "Hopper-v5",
-    "InvertedPendulum-v5",
-    "InvertedDoublePendulum-v5",
-    "Reacher-v5",
-    "Swimmer-v5",
-    "HalfCheetah-v5",
-    "Walker2d-v5",
-]
-# The paper's Table 1 scores (Schulman et al. 2017), in its row order; the settings' options are in table1.py.
-TABLE1_PAPER = {
-    "No clipping or penalty": -0.39,
-    "Clipping, ε = 0.1": 0.76,
-    "Clipping, ε = 0.2": 0.82,
-    "Clipping, ε = 0.3": 0.70,
-    "Adaptive KL, d_targ = 0.003": 0.68,
-    "Adaptive KL, d_targ = 0.01": 0.74,
-    "Adaptive KL, d_targ = 0.03": 0.71,
-    "Fixed KL, β = 0.3": 0.62,
-    "Fixed KL, β = 1": 0.71,
-    "Fixed KL, β = 3": 0.72,
-    "Fixed KL, β = 10": 0.69,
-}
-# Figure 3 of the paper, PPO (clip) at 1M steps, read off its plots (approximate): (low, high) of the readings.
-PAPER_FIGURE3 = {
-    "HalfCheetah-v5": (1800, 1800),
-    "Hopper-v5": (2200, 2300),
-    "InvertedDoublePendulum-v5": (8000, 8000),
-    "InvertedPendulum-v5": (1000, 1000),
-    "Reacher-v5": (-8, -5),
-    "Swimmer-v5": (110, 110),
-    "Walker2d-v5": (3000, 3400),
-}
-# CleanRL's ppo_continuous_action.py, MuJoCo v4, 1M steps, 3 seeds: (mean, std) from its published benchmark
-CLEANRL = {
-    "HalfCheetah-v5": (1442, 46),
-    "Hopper-v5": (2383, 272),
-    "Walker2d-v5": (2288, 572),
-    "InvertedPendulum-v5": (963, 22),
-}
+# Numbers typed in from their sources (benchmarks/README.md): per task in the paper's order, Figure 3 of the paper at
+# 1M steps as read off its plots (low, high) and CleanRL's published v4 benchmark (mean, sd); the paper's Table 1.
+PUBLISHED = {row["task"]: row for row in read_rows(RESULTS / "published_tasks.csv")}
+SEVEN_TASKS = list(PUBLISHED)
+PAPER_FIGURE3 = {task: (int(row["paper_low"]), int(row["paper_high"])) for task, row in PUBLISHED.items()}
+CLEANRL = {task: (int(r["cleanrl_mean"]), int(r["cleanrl_sd"])) for task, r in PUBLISHED.items() if r["cleanrl_mean"]}
+TABLE1_PAPER = {row["setting"]: float(row["paper_score"]) for row in read_rows(RESULTS / "published_table1.csv")}
 RANDOM_EPISODES, RANDOM_SEED = 100, 0
 STEPS_1M = 999_424  # 488 updates of 2048 steps
 

@@ -188,7 +188,7 @@ def main(argv=None) -> int:
     parser.add_argument("--no-sb3", action="store_true", help="leave Stable-Baselines3 out even if installed")
     parser.add_argument("--csv", help="the record to write (default: results/speed.csv, speed_minatar.csv on MinAtar)")
     args = parser.parse_args(argv)
-    args.updates = args.updates or (5 if minatar(args.env) else 3)
+    args.updates = (5 if minatar(args.env) else 3) if args.updates is None else args.updates
     args.csv = args.csv or str(MINATAR_CSV_PATH if minatar(args.env) else CSV_PATH)
     if args.rounds < 1 or args.updates < 1 or args.raw_steps < 1:
         common.fail("--rounds, --updates and --raw-steps must be positive")
