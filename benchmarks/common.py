@@ -59,12 +59,20 @@ def compact_progress(run_dir, digits: int = 6) -> None:
             return text
         return f"{value:.{digits}g}"
 
-    tmp = path.with_name("progress.tmp.csv")
+    write_rows(path, [{k: short(v) for k, v in row.items()} for row in rows])
+
+
+def write_rows(path, rows: list[dict], fields=None) -> Path:
+    """``rows`` as the CSV file ``path``, whole or not at all; ``fields``: its columns (by default the first row's)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp.csv")
     with open(tmp, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0].keys()), lineterminator="\n")
+        writer = csv.DictWriter(handle, fields or (list(rows[0]) if rows else ["empty"]), lineterminator="\n")
         writer.writeheader()
-        writer.writerows({k: short(v) for k, v in row.items()} for row in rows)
+        writer.writerows(rows)
     os.replace(tmp, path)
+    return path
 
 
 def add_sweep_options(parser) -> None:

@@ -16,7 +16,6 @@ benchmarks/results/minatar_runs.csv; recorded runs are skipped, so the same comm
 from __future__ import annotations
 
 import argparse
-import csv
 from pathlib import Path
 
 import numpy as np
@@ -62,10 +61,8 @@ def write_episodes(run_dir: Path) -> None:
         return
     with np.load(run_dir / "checkpoint.npz", allow_pickle=False) as data:
         returns, lengths = data["returns"], data["lengths"]
-    with open(target, "w", newline="") as handle:
-        writer = csv.writer(handle, lineterminator="\n")
-        writer.writerow(["return", "length"])
-        writer.writerows((f"{r:g}", int(n)) for r, n in zip(returns, lengths))
+    episodes = [{"return": f"{value:g}", "length": int(length)} for value, length in zip(returns, lengths)]
+    common.write_rows(target, episodes, ["return", "length"])
 
 
 def scores(run_dir: Path) -> tuple[float, float]:

@@ -17,7 +17,6 @@ another random draw) shows as a difference far above rounding at update 1.
 from __future__ import annotations
 
 import argparse
-import csv
 import os
 import subprocess
 import sys
@@ -120,10 +119,7 @@ def main(argv=None) -> int:
         table.append(row)
     same = ("env", "seed", "dtype", "earlier_commit")
     kept = [old for old in read_rows(args.csv) if any(str(old[k]) != str(table[0][k]) for k in same)]
-    with open(args.csv, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=FIELDS)
-        writer.writeheader()
-        writer.writerows(kept + table)
+    common.write_rows(args.csv, kept + table, FIELDS)
     for row in table:
         print(f"update {row['update']:>3}: largest relative difference {row['max_relative_difference']}")
     print(f"{args.env} seed {args.seed}, {args.dtype}: {earlier} against {current} -> {common.relative(args.csv)}")

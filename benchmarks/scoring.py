@@ -8,13 +8,12 @@ No sentences: the paragraphs around the tables are written once, by a person (be
 
 from __future__ import annotations
 
-import csv
 import math
 import statistics
 from collections import defaultdict
 from pathlib import Path
 
-from benchmarks.common import RESULTS, BenchmarkError, relative
+from benchmarks.common import RESULTS, BenchmarkError, relative, write_rows
 from minippo.records import read_rows
 
 TABLES = RESULTS / "tables"
@@ -282,15 +281,7 @@ def same_math(rows: list[dict]) -> list[dict]:
 
 def write(name: str, rows: list[dict], folder=TABLES) -> Path:
     """Write ``rows`` as ``folder/name.csv`` (whole, or not at all)."""
-    path = Path(folder) / f"{name}.csv"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp")
-    with open(tmp, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]) if rows else ["empty"], lineterminator="\n")
-        writer.writeheader()
-        writer.writerows(rows)
-    tmp.replace(path)
-    return path
+    return write_rows(Path(folder) / f"{name}.csv", rows)
 
 
 def markdown(rows: list[dict], columns: dict[str, str]) -> str:

@@ -26,11 +26,9 @@ for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_name] = "1"  # before NumPy (and torch) start their thread pools
 
 import argparse  # noqa: E402
-import csv  # noqa: E402
 import platform  # noqa: E402
 import statistics  # noqa: E402
 import time  # noqa: E402
-from pathlib import Path  # noqa: E402
 
 from benchmarks import common  # noqa: E402
 
@@ -236,12 +234,7 @@ def main(argv=None) -> int:
         "commit": common.git_commit(),
         "command": common.invocation("speed", argv),
     }
-    path = Path(args.csv)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="") as handle:  # one race per file: all its numbers come from the same run
-        writer = csv.DictWriter(handle, fieldnames=FIELDS, lineterminator="\n")
-        writer.writeheader()
-        writer.writerows({**row, **extra} for row in rows)
+    common.write_rows(args.csv, [{**row, **extra} for row in rows], FIELDS)  # one race per file
     for row in rows:
         print(f"{row['contender']:<8} {row['steps_per_s']!s:>9} steps/s   vs raw {row['vs_raw']!s:>6}   "
               f"vs sb3 {row['vs_sb3']!s:>6}   {row['version']}")  # fmt: skip

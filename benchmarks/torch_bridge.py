@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -25,7 +24,6 @@ from minippo.agent import ActorCritic
 from minippo.optimizer import Adam
 from minippo.ppo import OBJECTIVES, Config, update_minibatch
 from minippo.ppo import loss_and_grad as minippo_loss_and_grad
-from minippo.records import append_row
 
 CSV_PATH = common.RESULTS / "torch_bridge.csv"
 FIELDS = ["kind", "layout", "objective", "clip_fraction", "loss", "loss_difference", "max_gradient"]
@@ -163,10 +161,7 @@ def main(argv=None) -> int:
     extra = {"commit": common.git_commit(("minippo", "benchmarks/torch_bridge.py")), "torch": torch.__version__}
     extra["command"] = "python -m benchmarks.torch_bridge"
     rows = [{**compare(*case), **extra} for case in CASES]
-    path = Path(args.csv)
-    path.unlink(missing_ok=True)
-    for row in rows:
-        append_row(path, FIELDS, row)
+    path = common.write_rows(args.csv, rows, FIELDS)
     worst = max(max(r["loss_difference"], r["max_gradient_difference"], r["max_parameter_difference"]) for r in rows)
     print(f"{len(rows)} cases, largest difference {worst:.1e}; wrote {common.relative(path)}")
     return 0
