@@ -3,19 +3,15 @@
     python -m benchmarks.speed                            # Hopper-v5, 5 interleaved rounds -> results/speed.csv
     python -m benchmarks.speed --env MinAtar/Breakout-v1  # the paper's Atari settings -> results/speed_minatar.csv
 
-Each round measures, one after the other:
-  raw        random actions in ``gym.make(ENV)`` (its defaults), resetting at episode ends: the ceiling, since any
-             trainer has to step the environment too;
-  minippo    ``--updates`` training updates after one warm-up update, through ``minippo.ppo.Trainer``;
-  sb3        Stable-Baselines3 PPO with the same settings, one torch thread, device cpu, after one warm-up update;
-             skipped and recorded as skipped when it is not installed.
-On MuJoCo both trainers have the paper's settings, SB3's translated from minippo's Config as the side-by-side
-benchmark translates them (``peers.sb3_model``). On MinAtar both have the paper's Atari settings (``--preset atari``)
-and the network conv(16, 3×3) → ReLU → dense 128 → ReLU under a policy head and a value head (for SB3 a features
-extractor shared by both heads, its 8 environments in a DummyVecEnv in one process, as minippo steps them). Both
-trainers get one math thread. The rounds are interleaved so that a change in the machine's load hits all three; the
-table keeps each round and reports the median. Run it while no training is running: the 1-minute load average goes
-in the CSV.
+Each round measures, one after the other: raw stepping (random actions in ``gym.make(ENV)``, resetting at episode
+ends: the ceiling, since any trainer steps the environment too); ``--updates`` updates of minippo's ``Trainer`` after a
+warm-up update; and Stable-Baselines3 PPO with the same settings after a warm-up update, one torch thread, device cpu
+(recorded as skipped when it is not installed). On MuJoCo both have the paper's settings, SB3's translated from
+minippo's Config as the side-by-side benchmark translates them (``peers.sb3_model``); on MinAtar the paper's Atari
+settings (``--preset atari``) and the network conv(16, 3×3) → ReLU → dense 128 → ReLU under a policy head and a value
+head (for SB3 a shared features extractor, its environments stepped in one process as minippo's are). The rounds are
+interleaved so that a change in the machine's load hits all three; the table reports the medians. Run it while no
+training is running: the 1-minute load average goes in the CSV.
 """
 
 from __future__ import annotations
@@ -161,18 +157,14 @@ def summarize(env_id: str, rounds: dict[str, list[float]], steps: dict[str, int]
     rows = []
     for name in ("raw", "minippo", "sb3"):
         median = medians.get(name)
-        rows.append(
-            {
-                "env": env_id,
-                "contender": name,
-                "steps_per_s": round(median, 1) if median is not None else "",
-                "rounds": ";".join(f"{value:.1f}" for value in rounds.get(name, [])),
-                "steps_per_round": steps.get(name, ""),
-                "vs_raw": round(median / medians["raw"], 3) if median is not None and "raw" in medians else "",
-                "vs_sb3": round(median / medians["sb3"], 3) if median is not None and "sb3" in medians else "",
-                "version": versions.get(name, ""),
-            }
-        )
+        row = {"env": env_id, "contender": name, "steps_per_s": round(median, 1) if median is not None else ""}
+        row |= {
+            "rounds": ";".join(f"{value:.1f}" for value in rounds.get(name, [])),
+            "steps_per_round": steps.get(name, ""),
+        }
+        for other in ("raw", "sb3"):
+            row[f"vs_{other}"] = round(median / medians[other], 3) if median is not None and other in medians else ""
+        rows.append({**row, "version": versions.get(name, "")})
     return rows
 
 
