@@ -44,9 +44,6 @@ EVAL_EPISODES, EVAL_SEED = 10, 0  # minippo eval's defaults: episode k is reset 
 FIELDS = ["library", "version", "task", "seed", "steps", "return_mean", "eval_mean", "wall_s", "commit", "command"]
 CSV_PATH = common.RESULTS / "peers.csv"
 RUN_ROOT = common.RUNS / "peers"
-SB3_MISSING = (
-    'Stable-Baselines3 is not installed: pip install torch==2.13.0 (the CPU wheel) and then pip install -e ".[peers]"'
-)
 
 
 # SB3's settings, from minippo's Config
@@ -206,18 +203,10 @@ def sb3_run(config_dict: dict, name: str = "", board=None) -> dict:
     import ray  # a task of the sweep engine
 
     node = ray.get_runtime_context().get_node_id()[:12] if ray.is_initialized() else ""
-    return {
-        "files": {
-            "config.json": (json.dumps(described, indent=2) + "\n").encode(),
-            "progress.csv": ("\n".join(lines) + "\n").encode(),
-        },
-        "last": rows[-1],
-        "eval": episodes,
-        "version": f"stable-baselines3 {stable_baselines3.__version__}, torch {torch.__version__}",
-        "node": node,
-        "host": socket.gethostname(),
-        "pid": os.getpid(),
-    }
+    files = {"config.json": json.dumps(described, indent=2) + "\n", "progress.csv": "\n".join(lines) + "\n"}
+    version = f"stable-baselines3 {stable_baselines3.__version__}, torch {torch.__version__}"
+    result = {"files": {key: text.encode() for key, text in files.items()}, "last": rows[-1], "eval": episodes}
+    return result | {"version": version, "node": node, "host": socket.gethostname(), "pid": os.getpid()}
 
 
 def sb3_evaluate(model, venv, env_id: str, episodes: int, seed: int) -> list[float]:
@@ -299,18 +288,10 @@ class PeerSweep(Sweep):
 
 def peer_row(run, row: dict, result: dict) -> dict:
     """A peers.csv row from the engine's sweep row and the task's result."""
-    return {
-        "library": run.labels["library"],
-        "version": result["version"],
-        "task": run.labels["task"],
-        "seed": run.labels["seed"],
-        "steps": int(row["steps"]),
-        "return_mean": round(float(row["return_mean"]), 2),
-        "eval_mean": round(statistics.fmean(result["eval"]), 2),
-        "wall_s": round(float(row["wall_s"]), 1),
-        "commit": row["commit"],
-        "command": row["command"],
-    }
+    train, evaluation = round(float(row["return_mean"]), 2), round(statistics.fmean(result["eval"]), 2)
+    record = {"library": run.labels["library"], "version": result["version"], "task": run.labels["task"]}
+    record |= {"seed": run.labels["seed"], "steps": int(row["steps"]), "return_mean": train, "eval_mean": evaluation}
+    return record | {"wall_s": round(float(row["wall_s"]), 1), "commit": row["commit"], "command": row["command"]}
 
 
 def code_commit() -> str:
@@ -358,7 +339,7 @@ def evaluate_record(runs_csv, runs_root, record_csv, tasks=TASKS) -> int:
             common.fail(f"no policy.npz in {folder}: the final policies stay on the machine that trained them")
         returns = evaluate(folder, EVAL_EPISODES, EVAL_SEED)
         row = {"library": "minippo", "version": minippo_version(), "task": run["env"], **run}
-        row["eval_mean"] = round(sum(returns) / len(returns), 2)
+        row["eval_mean"] = round(statistics.fmean(returns), 2)
         append_row(record_csv, FIELDS, row)
         added += 1
     return added
@@ -388,7 +369,8 @@ def main(argv=None) -> int:
         return common.show_list(runs, args.csv, FIELDS)
     check_tasks(args.tasks)
     if "sb3" in args.libraries and importlib.util.find_spec("stable_baselines3") is None:
-        common.fail(SB3_MISSING)
+        install = 'pip install torch==2.13.0 (the CPU wheel) and then pip install -e ".[peers]"'
+        common.fail(f"Stable-Baselines3 is not installed: {install}")
     ship_by_value()
     engine = functools.partial(PeerSweep, record_csv=args.csv)
     return common.run_sweep(runs, args.runs, args.csv, FIELDS, args, engine=engine)
