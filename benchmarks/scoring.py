@@ -180,24 +180,18 @@ def seven_tasks(runs: list[dict], record: str) -> list[dict]:
         returns = [float(r["return_mean"]) for r in rows]
         mean, sd = mean_sd(returns)
         low, high = PAPER_FIGURE3[env_id]
-        table.append(
-            {
-                "record": record,
-                "task": env_id,
-                "seeds": len(rows),
-                "returns": " ".join(f"{value:.1f}" for value in returns),
-                "mean": round(mean, 1),
-                "sd": round(sd, 1),
-                "paper_low": low,
-                "paper_high": high,
-                "paper": f"{low}" if low == high else f"{low} to {high}",
-                "at_or_above_paper": "yes" if mean >= low else "no",
-                "cleanrl": "{} ± {}".format(*CLEANRL[env_id]) if env_id in CLEANRL else "—",
-                "minutes": round(statistics.fmean(float(r["wall_s"]) for r in rows) / 60, 1),
-                "commits": " ".join(sorted({r["commit"] for r in rows})),
-            }
-        )
+        row = {"record": record, "task": env_id, "seeds": len(rows), "returns": " ".join(f"{v:.1f}" for v in returns)}
+        row |= {"mean": round(mean, 1), "sd": round(sd, 1), "paper_low": low, "paper_high": high}
+        row["paper"] = f"{low}" if low == high else f"{low} to {high}"
+        row["at_or_above_paper"] = "yes" if mean >= low else "no"
+        row["cleanrl"] = "{} ± {}".format(*CLEANRL[env_id]) if env_id in CLEANRL else "—"
+        table.append(row | {"minutes": minutes(rows), "commits": " ".join(sorted({r["commit"] for r in rows}))})
     return table
+
+
+def minutes(runs: list[dict]) -> float:
+    """The mean minutes of a run, by the runs' own clocks."""
+    return round(statistics.fmean(float(run["wall_s"]) for run in runs) / 60, 1)
 
 
 def peers(rows: list[dict]) -> list[dict]:
@@ -213,21 +207,14 @@ def peers(rows: list[dict]) -> list[dict]:
         for score, column in (("train", "return_mean"), ("eval", "eval_mean")):
             a, b = [float(r[column]) for r in mine], [float(r[column]) for r in theirs]
             interval = welch_interval(a, b)
-            table.append(
-                {
-                    "task": task,
-                    "score": score,
-                    "minippo_mean": round(statistics.fmean(a), 1),
-                    "minippo_se": round(statistics.stdev(a) / math.sqrt(len(a)), 1),
-                    "sb3_mean": round(statistics.fmean(b), 1),
-                    "sb3_se": round(statistics.stdev(b) / math.sqrt(len(b)), 1),
-                    "seeds": f"{len(a)}/{len(b)}",
-                    **{key: round(interval[key], 1) for key in ("diff", "low", "high")},
-                    "standing": interval["standing"],
-                    "minippo_minutes": round(statistics.fmean(float(r["wall_s"]) for r in mine) / 60, 1),
-                    "sb3_minutes": round(statistics.fmean(float(r["wall_s"]) for r in theirs) / 60, 1),
-                }
-            )
+            row = {"task": task, "score": score}
+            for library, values in (("minippo", a), ("sb3", b)):
+                row[f"{library}_mean"] = round(statistics.fmean(values), 1)
+                row[f"{library}_se"] = round(statistics.stdev(values) / math.sqrt(len(values)), 1)
+            row["seeds"] = f"{len(a)}/{len(b)}"
+            row |= {key: round(interval[key], 1) for key in ("diff", "low", "high")}
+            row["standing"] = interval["standing"]
+            table.append(row | {"minippo_minutes": minutes(mine), "sb3_minutes": minutes(theirs)})
     return table
 
 
@@ -260,19 +247,9 @@ def same_math(rows: list[dict]) -> list[dict]:
     for (env_id, seed, dtype, earlier, commit), runs in groups.items():
         runs.sort(key=lambda row: int(row["update"]))
         parted = [int(r["update"]) for r in runs if float(r["max_relative_difference"]) > 0.01]
-        table.append(
-            {
-                "env": env_id,
-                "seed": seed,
-                "dtype": dtype,
-                "earlier_commit": earlier,
-                "commit": commit,
-                "updates": len(runs),
-                "difference_at_update_1": runs[0]["max_relative_difference"],
-                "parted_at_update": parted[0] if parted else "",
-                "command": runs[0]["command"],
-            }
-        )
+        row = {"env": env_id, "seed": seed, "dtype": dtype, "earlier_commit": earlier, "commit": commit}
+        row |= {"updates": len(runs), "difference_at_update_1": runs[0]["max_relative_difference"]}
+        table.append(row | {"parted_at_update": parted[0] if parted else "", "command": runs[0]["command"]})
     return table
 
 
