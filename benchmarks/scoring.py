@@ -120,21 +120,15 @@ def table1(runs: list[dict], randoms: list[dict], tasks, seeds, steps: int) -> l
     if not runs:
         raise BenchmarkError("no setting or task has all its runs recorded yet")
     scores = normalized_scores(runs, random_returns(randoms))
-    return [
-        {
-            "setting": name,
-            "score": round(scores[name]["score"], 2),
-            "score_se": "" if scores[name]["se"] is None else round(scores[name]["se"], 2),
-            "paper_score": paper,
-            "runs": scores[name]["runs"],
-            "tasks": scores[name]["tasks"],
-            "task_ids": " ".join(env_id for env_id in tasks if env_id in scores[name]["per_task"]),
-            "seeds": len(seeds),
-            "steps": steps,
-        }
-        for name, paper in TABLE1_PAPER.items()
-        if name in scores
-    ]
+    table = []
+    for name, paper in TABLE1_PAPER.items():
+        if name in scores:
+            score, se = scores[name]["score"], scores[name]["se"]
+            row = {"setting": name, "score": round(score, 2), "score_se": "" if se is None else round(se, 2)}
+            row |= {"paper_score": paper, "runs": scores[name]["runs"], "tasks": scores[name]["tasks"]}
+            row["task_ids"] = " ".join(env_id for env_id in tasks if env_id in scores[name]["per_task"])
+            table.append(row | {"seeds": len(seeds), "steps": steps})
+    return table
 
 
 def on_one_scale(records: dict[str, list[dict]], randoms: list[dict]) -> list[dict]:
@@ -150,20 +144,15 @@ def on_one_scale(records: dict[str, list[dict]], randoms: list[dict]) -> list[di
     if not pool:
         return []
     scores = normalized_scores(pool, random_returns(randoms))
-    return [
-        {
-            "setting": setting,
-            "record": name,
-            "score": round(scores[(setting, name)]["score"], 3),
-            "score_se": round(scores[(setting, name)]["se"] or 0.0, 3),
-            "runs": scores[(setting, name)]["runs"],
-            "tasks": len(tasks),
-            "paper_score": paper,
-        }
-        for setting, paper in TABLE1_PAPER.items()
-        for name in records
-        if (setting, name) in scores
-    ]
+    table = []
+    for setting, paper in TABLE1_PAPER.items():
+        for name in records:
+            if (setting, name) in scores:
+                score = scores[(setting, name)]
+                row = {"setting": setting, "record": name, "score": round(score["score"], 3)}
+                row |= {"score_se": round(score["se"] or 0.0, 3), "runs": score["runs"], "tasks": len(tasks)}
+                table.append(row | {"paper_score": paper})
+    return table
 
 
 # the seven tasks, the side-by-side comparison, the rechecks
