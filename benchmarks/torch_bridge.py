@@ -12,6 +12,7 @@ objective, both action kinds and both network layouts and writes the record the 
 from __future__ import annotations
 
 import argparse
+import itertools
 import sys
 
 import numpy as np
@@ -123,16 +124,10 @@ def compare(kind, shared, objective, seed=0, adam_steps=4) -> dict:
     clip_fraction = losses.clip_fraction(logp, mb["logp"], config.clip_epsilon)
     loss, _ = minippo_loss_and_grad(agent, mb, config, kl_beta=0.7)
     torch_loss, torch_grad = loss_and_grad(theta, agent, mb, config, kl_beta=0.7)
-    row = {
-        "kind": kind,
-        "layout": "shared" if shared else "separate",
-        "objective": objective,
-        "clip_fraction": clip_fraction,
-        "loss": loss,
-        "loss_difference": abs(loss - torch_loss),
-        "max_gradient": float(np.abs(agent.grads).max()),
-        "max_gradient_difference": float(np.abs(agent.grads - torch_grad).max()),
-    }
+    row = {"kind": kind, "layout": "shared" if shared else "separate", "objective": objective}
+    row |= {"clip_fraction": clip_fraction, "loss": loss, "loss_difference": abs(loss - torch_loss)}
+    row["max_gradient"] = float(np.abs(agent.grads).max())
+    row["max_gradient_difference"] = float(np.abs(agent.grads - torch_grad).max())
     # the same update with each library's Adam: the gradient-norm clip, then one Adam step per minibatch
     optimizer = Adam(agent.params, lr=config.lr, eps=config.adam_eps)
     torch_optimizer = torch.optim.Adam([theta], lr=config.lr, eps=config.adam_eps)
@@ -146,12 +141,7 @@ def compare(kind, shared, objective, seed=0, adam_steps=4) -> dict:
     return row
 
 
-CASES = [
-    (kind, shared, objective)
-    for kind in ("discrete", "continuous")
-    for shared in (False, True)
-    for objective in OBJECTIVES
-]
+CASES = list(itertools.product(("discrete", "continuous"), (False, True), OBJECTIVES))  # kind, shared, objective
 
 
 def main(argv=None) -> int:
