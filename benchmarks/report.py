@@ -18,27 +18,13 @@ from benchmarks.common import RESULTS, ROOT, RUNS, fail
 from minippo.plotting import INK, ORANGE, SAGE, draw_seed_band, read_progress, seed_curves
 from minippo.records import read_rows
 
-SEVEN = {
-    "Task": "{task}",
-    "record": "`{record}`",
-    "minippo, mean ± sd": "{mean:,.1f} ± {sd:,.1f}",
-    "seeds' returns": "{returns}",
-    "paper (Fig. 3, ≈)": "{paper}",
-    "CleanRL (v4)": "{cleanrl}",
-    "≥ paper's low end": "{at_or_above_paper}",
-    "min per run": "{minutes}",
-    "commits": "{commits}",
-}
-PEERS = {
-    "Task": "{task}",
-    "score": "{score}",
-    "minippo": "{minippo_mean:,.0f} ± {minippo_se:,.0f}",
-    "SB3": "{sb3_mean:,.0f} ± {sb3_se:,.0f}",
-    "seeds": "{seeds}",
-    "minippo − SB3 [95%]": "{diff:+,.0f} [{low:+,.0f}, {high:+,.0f}]",
-    "standing": "{standing}",
-    "min per run (minippo / SB3)": "{minippo_minutes} / {sb3_minutes}",
-}
+SEVEN = {"Task": "{task}", "record": "`{record}`", "minippo, mean ± sd": "{mean:,.1f} ± {sd:,.1f}"}
+SEVEN |= {"seeds' returns": "{returns}", "paper (Fig. 3, ≈)": "{paper}", "CleanRL (v4)": "{cleanrl}"}
+SEVEN |= {"≥ paper's low end": "{at_or_above_paper}", "min per run": "{minutes}", "commits": "{commits}"}
+PEERS = {"Task": "{task}", "score": "{score}", "minippo": "{minippo_mean:,.0f} ± {minippo_se:,.0f}"}
+PEERS |= {"SB3": "{sb3_mean:,.0f} ± {sb3_se:,.0f}", "seeds": "{seeds}"}
+PEERS |= {"minippo − SB3 [95%]": "{diff:+,.0f} [{low:+,.0f}, {high:+,.0f}]", "standing": "{standing}"}
+PEERS |= {"min per run (minippo / SB3)": "{minippo_minutes} / {sb3_minutes}"}
 TABLE1 = {"Setting": "{setting}", "score ± se": "{score:.2f} ± {score_se}", "paper": "{paper_score:.2f}"}
 TABLE1 |= {"runs": "{runs}", "tasks": "{tasks}"}
 SCALE = {"Setting": "{setting}", "record": "{record}", "score ± se": "{score:.2f} ± {score_se:.2f}"}
