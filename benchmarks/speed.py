@@ -104,26 +104,13 @@ def sb3_minatar_model(config):
     def annealed(initial):
         return lambda progress_remaining: initial * progress_remaining  # α falls linearly from 1 to 0
 
+    settings = dict(n_steps=config.horizon, batch_size=config.minibatch_size, n_epochs=config.epochs)
+    settings |= dict(gamma=config.gamma, gae_lambda=config.gae_lambda, ent_coef=config.entropy_coef)
+    settings |= dict(vf_coef=config.value_coef, max_grad_norm=config.max_grad_norm, learning_rate=annealed(config.lr))
+    settings |= dict(clip_range=annealed(config.clip_epsilon), clip_range_vf=annealed(config.clip_epsilon))
+    trunk = dict(features_extractor_class=MinAtarTrunk, net_arch=[], share_features_extractor=True)
     env = make_vec_env(config.env_id, config.num_envs, config.seed)
-    return PPO(
-        "MlpPolicy",
-        env,
-        n_steps=config.horizon,
-        batch_size=config.minibatch_size,
-        n_epochs=config.epochs,
-        learning_rate=annealed(config.lr),
-        clip_range=annealed(config.clip_epsilon),
-        clip_range_vf=annealed(config.clip_epsilon),
-        gamma=config.gamma,
-        gae_lambda=config.gae_lambda,
-        ent_coef=config.entropy_coef,
-        vf_coef=config.value_coef,
-        max_grad_norm=config.max_grad_norm,
-        policy_kwargs=dict(features_extractor_class=MinAtarTrunk, net_arch=[], share_features_extractor=True),
-        device="cpu",
-        seed=config.seed,
-        verbose=0,
-    )
+    return PPO("MlpPolicy", env, policy_kwargs=trunk, device="cpu", seed=config.seed, verbose=0, **settings)
 
 
 class StableBaselinesContender:
