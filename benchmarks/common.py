@@ -1,5 +1,6 @@
-"""What the runners share: the repository's paths, a one-line error, the progress.csv rounding of committed runs, and
-running a list of ``minippo.sweep.Run`` on minippo sweep's engine into a runs record of the runner's own columns."""
+"""What the runners share: the repository's paths, a one-line error, one CSV writer, the progress.csv rounding of
+committed runs, and running a list of ``minippo.sweep.Run`` on minippo sweep's engine into a record of the runner's
+own columns (what is recorded and what is left, ``--list``, resuming)."""
 
 from __future__ import annotations
 
@@ -119,12 +120,11 @@ def record_sweep(runs, root, record_csv, fields: list[str], more=None) -> int:
     clock, commit and command, and ``more(folder)``'s columns), rounding each run's progress.csv; returns how many
     were added."""
     key = label_key(runs, fields)
-    by_key = {tuple(str(run.labels[k]) for k in key): run for run in runs}
-    recorded = {tuple(row[k] for k in key) for row in read_rows(record_csv)}
+    left = {tuple(str(run.labels[k]) for k in key): run for run in todo(runs, record_csv, fields)}
     added = 0
     for row in read_rows(Path(root) / "sweep.csv"):
-        run = by_key.get(tuple(row[k] for k in key))
-        if row["status"] != "ok" or run is None or tuple(row[k] for k in key) in recorded:
+        run = left.pop(tuple(row[k] for k in key), None) if row["status"] == "ok" else None
+        if run is None:
             continue
         extra = more(Path(root) / run.name) if more else {}
         compact_progress(Path(root) / run.name)
@@ -132,7 +132,6 @@ def record_sweep(runs, root, record_csv, fields: list[str], more=None) -> int:
         numbers |= {"wall_s": round(float(row["wall_s"]), 1), "steps_per_s": round(float(row["steps_per_s"]), 1)}
         numbers |= {**extra, "commit": row["commit"], "command": row["command"]}
         append_row(record_csv, fields, {**run.labels, **numbers})
-        recorded.add(tuple(row[k] for k in key))
         added += 1
     return added
 

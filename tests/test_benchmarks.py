@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from benchmarks import common, report, scoring, seven_tasks, speed, table1
-from minippo.records import read_rows
+from minippo.records import append_row, read_rows
 
 
 def write_csv(path, rows):
@@ -220,6 +220,26 @@ def test_ablations_record_each_detail_off_with_the_last_ten_updates(tmp_path, st
     assert stub_engine[1].config.use_gae is False and stub_engine[0].config.use_gae is True
     assert ablations.main(["--only", "default", "--seeds", "3", "--steps", "4096", "--quiet"]) == 0
     assert len(stub_engine) == 2  # recorded: not run again
+
+
+def test_runs_an_interrupted_runner_finished_are_recorded_once(tmp_path):
+    """The engine logged two ok runs and a failed one in sweep.csv before the record was written: the next invocation
+    copies the ok ones that the record lacks, and only once."""
+    runs = seven_tasks.sweep_runs(["Hopper-v5"], [1, 2, 3], 4096)
+    for seed in (1, 2):
+        fake_run(tmp_path / f"Hopper-v5-seed{seed}", 2, [1.23456789, 2.0 + seed])
+    row = {"env": "Hopper-v5", "steps": "4096", "wall_s": "2.04", "steps_per_s": "2000.04", "commit": "c"}
+    log = [{**row, "seed": str(seed), "return_mean": str(2.0 + seed), "status": status, "command": f"train {seed}"}
+           for seed, status in ((1, "ok"), (2, "ok"), (3, "failed"))]  # fmt: skip
+    write_csv(tmp_path / "sweep.csv", log)
+    record = tmp_path / "mujoco.csv"
+    append_row(record, seven_tasks.FIELDS, {**row, "seed": 2, "return_mean": 4.0, "command": "train 2"})
+    assert common.record_sweep(runs, tmp_path, record, seven_tasks.FIELDS) == 1
+    assert common.record_sweep(runs, tmp_path, record, seven_tasks.FIELDS) == 0
+    recorded = [(r["seed"], r["return_mean"], r["command"]) for r in read_rows(record)]
+    assert recorded == [("2", "4.0", "train 2"), ("1", "3.0", "train 1")]
+    assert read_rows(tmp_path / "Hopper-v5-seed1" / "progress.csv")[0]["return_mean"] == "1.23457"  # rounded
+    assert [run.labels["seed"] for run in common.todo(runs, record, seven_tasks.FIELDS)] == [3]
 
 
 def test_table1_sweep_makes_the_commands_of_its_records():
