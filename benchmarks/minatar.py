@@ -3,14 +3,12 @@
     python -m benchmarks.minatar --steps N       # every (algorithm, game, seed) not yet recorded, then the table
     python -m benchmarks.minatar --score         # only recompute benchmarks/results/minatar.csv from the records
 
-PPO runs with the paper's Atari settings (``--preset atari``, its Table 5), A2C with ``--preset a2c``, on the same
-network (minippo/presets.py says where each differs from the paper). Both of the paper's Atari scores: the mean
-episode return over all of training, and over the last 100 episodes; a game is won by the higher mean over seeds.
-Each run's episode returns go to ``episodes.csv`` in its folder, so both scores can be recomputed from committed
-files. Choose --steps from the measured speed (``python -m benchmarks.speed --env MinAtar/Breakout-v1``): steps =
-hours × 3600 × workers × steps/s / 30. Each run is what ``minippo train ENV --steps N --seed S --out
-benchmarks/runs/minatar/<alg>-ENV-seedS --quiet --preset <alg>`` runs, as a Ray task of one CPU, recorded in
-benchmarks/results/minatar_runs.csv; recorded runs are skipped, so the same command resumes.
+PPO runs with ``--preset atari`` (the paper's Table 5), A2C with ``--preset a2c``, on the same network. Both of the
+paper's scores: the mean episode return over all of training and over the last 100 episodes (from each run's
+``episodes.csv``); a game is won by the higher mean over seeds. For --steps, from the measured speed (``python -m
+benchmarks.speed --env MinAtar/Breakout-v1``): steps = hours × 3600 × workers × steps/s / 30. Each run is ``minippo
+train ENV --steps N --seed S --out benchmarks/runs/minatar/<alg>-ENV-seedS --quiet --preset <alg>``, recorded in
+benchmarks/results/minatar_runs.csv; recorded runs are skipped.
 """
 
 from __future__ import annotations

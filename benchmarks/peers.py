@@ -3,16 +3,12 @@ settings (the paper's MuJoCo settings), the same seeds, on the same machine, as 
 
     python -m benchmarks.peers                       # 3 tasks × seeds 1–5 × 2 libraries × 1M steps: 30 runs
     python -m benchmarks.peers --tasks Hopper-v5 --seeds 1 2 --libraries sb3
-    python -m benchmarks.peers --address HOST:PORT   # on a running Ray cluster
     python -m benchmarks.peers --list                # what is recorded, what is left
 
-Every run is a Ray task of one CPU and one math thread. A minippo run is exactly ``minippo train TASK --steps N
---seed S``; an SB3 run is ``stable_baselines3.PPO`` with every setting translated from the same ``Config`` by
-``sb3_settings`` (benchmarks/README.md tabulates how each setting was matched, and where the two cannot match). Both
-are scored the same way: the mean return of the last 100 training episodes, and of 10 deterministic episodes of the
-final policy (reset seeds 0–9, observation statistics frozen). Each finished run adds one row to
-benchmarks/results/peers.csv and its folder to benchmarks/runs/peers/<library>-TASK-seedS/ (SB3's with its learning
-curve in minippo's progress.csv columns); recorded runs are skipped, so the same command resumes.
+A minippo run is ``minippo train TASK --steps N --seed S``; an SB3 run is ``stable_baselines3.PPO`` with every
+setting translated from the same ``Config`` by ``sb3_settings`` (benchmarks/README.md tabulates how each was matched).
+Both are scored on the last 100 training episodes and on 10 deterministic episodes of the final policy, one row per
+run in benchmarks/results/peers.csv; recorded runs are skipped.
 """
 
 from __future__ import annotations

@@ -1,15 +1,12 @@
-"""The paper's seven MuJoCo tasks (Gymnasium v5), 1,000,000 steps, 3 seeds, paper defaults: a sweep on minippo
-sweep's engine.
+"""The paper's seven MuJoCo tasks (Gymnasium v5), 1,000,000 steps, 3 seeds, paper defaults, on minippo sweep's engine.
 
     python -m benchmarks.seven_tasks                       # every (task, seed) not yet recorded, Hopper first
     python -m benchmarks.seven_tasks --envs Hopper-v5 --seeds 1 2 3
     python -m benchmarks.seven_tasks --address HOST:PORT   # on a running Ray cluster
     python -m benchmarks.seven_tasks --list                # what is recorded, what is left
 
-Each training is what ``minippo train ENV --steps 1000000 --seed S --out benchmarks/runs/mujoco/ENV-seedS --quiet``
-runs, as a Ray task of one CPU (on this machine, one per core, unless ``--workers`` or ``--address``). When it
-finishes, its folder is written, its progress.csv rounded, and one row appended to benchmarks/results/mujoco.csv
-with that command. Recorded (task, seed) pairs are skipped, so the same command resumes where it stopped.
+Each run is ``minippo train ENV --steps 1000000 --seed S --out benchmarks/runs/mujoco/ENV-seedS --quiet``, as a Ray
+task of one CPU, recorded in benchmarks/results/mujoco.csv with that command; recorded runs are skipped.
 """
 
 from __future__ import annotations

@@ -5,10 +5,9 @@ as a sweep on minippo sweep's engine.
     python -m benchmarks.ablations --dry-run    # print the commands of the runs not yet recorded
     python -m benchmarks.ablations --only default anneal_lr --seeds 3
 
-Each run is what ``minippo train Hopper-v5 --steps 163840 --seed S --out benchmarks/ablations/runs/<ablation>-seedS
---quiet --config <the detail>=false`` runs, as a Ray task of one CPU; its config.json and progress.csv stay in that
-folder, and one row goes to benchmarks/ablations/results.csv with the command, where ``return_last10`` is the mean
-of the last 10 updates' returns. Recorded runs are skipped, so the same command resumes.
+Each run is ``minippo train Hopper-v5 --steps 163840 --seed S --out benchmarks/ablations/runs/<ablation>-seedS --quiet
+--config <the detail>=false``, recorded in benchmarks/ablations/results.csv with its command and ``return_last10``,
+the mean of the last 10 updates' returns; recorded runs are skipped.
 """
 
 from __future__ import annotations
