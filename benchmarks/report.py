@@ -39,7 +39,7 @@ COLUMNS |= {"table1_1m_more_seeds": SCALE, "same_math": SAME}
 TEMPLATE = Path(__file__).with_name("summary_template.md")
 
 
-def figure_seven_tasks(rows: list[dict], out: Path, runs_root=RUNS / "mujoco") -> None:
+def figure_seven_tasks(rows: list[dict], out: Path, runs_root=RUNS / "seven_tasks") -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(2, 4, figsize=(13, 5.6), dpi=100)
@@ -55,7 +55,8 @@ def figure_seven_tasks(rows: list[dict], out: Path, runs_root=RUNS / "mujoco") -
     save(fig, out)
 
 
-def figure_peers(rows: list[dict], out: Path, runs_root=RUNS / "peers") -> None:
+def figure_peers(rows: list[dict], out: Path, runs_root=RUNS / "peers", minippo_root=RUNS / "seven_tasks") -> None:
+    """SB3's curves from the side-by-side runs, minippo's from the seven-task runs its side reads."""
     import matplotlib.pyplot as plt
 
     tasks = list(dict.fromkeys(row["task"] for row in rows))
@@ -63,7 +64,13 @@ def figure_peers(rows: list[dict], out: Path, runs_root=RUNS / "peers") -> None:
     for ax, task in zip(axes[0], tasks):
         for library, colour in (("minippo", ORANGE), ("sb3", SAGE)):
             seeds = [r["seed"] for r in rows if r["task"] == task and r["library"] == library]
-            runs = [read_progress(Path(runs_root) / f"{library}-{task}-seed{seed}") for seed in seeds]
+            folders = [
+                Path(minippo_root) / f"{task}-seed{seed}"
+                if library == "minippo"
+                else Path(runs_root) / f"sb3-{task}-seed{seed}"
+                for seed in seeds
+            ]
+            runs = [read_progress(folder) for folder in folders]
             curves = seed_curves(runs)
             if curves is not None:
                 draw_seed_band(ax, *curves, colour, f"{library}, {len(runs)} seeds")
@@ -107,7 +114,7 @@ def summary_text(tables: dict[str, list[dict]]) -> str:
 
 
 def readme_blocks(tables: dict[str, list[dict]], speed: list[dict]) -> dict[str, str]:
-    seven = [row for row in tables["seven_tasks"] if row["record"] == "mujoco.csv"]
+    seven = [row for row in tables["seven_tasks"] if row["record"] == "seven_tasks_runs.csv"]
     columns = {k: SEVEN[k] for k in ("Task", "minippo, mean ± sd", "paper (Fig. 3, ≈)", "CleanRL (v4)")}
     return {
         "mujoco": scoring.markdown(seven, columns),
@@ -131,8 +138,9 @@ def main(argv=None) -> int:
     matplotlib.use("Agg")
     tables = scoring.score_all()
     (RESULTS / "summary.md").write_text(summary_text(tables))
-    figure_seven_tasks(read_rows(RESULTS / "mujoco.csv"), RESULTS / "mujoco_curves.png")
-    figure_peers(read_rows(RESULTS / "peers.csv"), RESULTS / "peers_curves.png")
+    figure_seven_tasks(read_rows(RESULTS / "seven_tasks_runs.csv"), RESULTS / "mujoco_curves.png")
+    peer_rows = [row for row in read_rows(RESULTS / "peers.csv") if row["library"] == "sb3"]
+    figure_peers(peer_rows + read_rows(RESULTS / "peers_minippo.csv"), RESULTS / "peers_curves.png")
     figure_table1(tables["table1_1m"], RESULTS / "table1_1m.png")
     readme = ROOT / "README.md"
     try:
