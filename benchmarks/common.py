@@ -1,5 +1,6 @@
-"""What the runners share: the repository's paths, a one-line error, the progress.csv rounding of committed runs, and
-running a list of ``minippo.sweep.Run`` on minippo sweep's engine into a runs record of the runner's own columns."""
+"""What the runners share: the repository's paths, a one-line error, one CSV writer, the progress.csv rounding of
+committed runs, and running a list of ``minippo.sweep.Run`` on minippo sweep's engine into a record of the runner's
+own columns (what is recorded and what is left, ``--list``, resuming)."""
 
 from __future__ import annotations
 
@@ -23,7 +24,8 @@ class BenchmarkError(Exception):
 
 
 def fail(message: str) -> None:
-    print(f"{Path(sys.argv[0]).name}: error: {message}", file=sys.stderr)
+    program = Path(sys.argv[0])  # a runner's file, or the folder of a package's __main__.py
+    print(f"{program.parent.name if program.stem == '__main__' else program.name}: error: {message}", file=sys.stderr)
     raise SystemExit(2)
 
 
@@ -37,8 +39,9 @@ def git_commit(paths: tuple[str, ...] = ("minippo",)) -> str:
     return commit_of_code(paths, ROOT)
 
 
-def shell_text(argv: list[str]) -> str:
-    return " ".join(shlex.quote(part) for part in argv)
+def invocation(module: str, argv) -> str:
+    """The command that ran ``python -m benchmarks.MODULE`` with ``argv`` (None: this process's), as records keep it."""
+    return f"python -m benchmarks.{module} {shlex.join(sys.argv[1:] if argv is None else argv)}".strip()
 
 
 def compact_progress(run_dir, digits: int = 6) -> None:
@@ -57,12 +60,20 @@ def compact_progress(run_dir, digits: int = 6) -> None:
             return text
         return f"{value:.{digits}g}"
 
-    tmp = path.with_name("progress.tmp.csv")
+    write_rows(path, [{k: short(v) for k, v in row.items()} for row in rows])
+
+
+def write_rows(path, rows: list[dict], fields=None) -> Path:
+    """``rows`` as the CSV file ``path``, whole or not at all; ``fields``: its columns (by default the first row's)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp.csv")
     with open(tmp, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0].keys()), lineterminator="\n")
+        writer = csv.DictWriter(handle, fields or (list(rows[0]) if rows else ["empty"]), lineterminator="\n")
         writer.writeheader()
-        writer.writerows({k: short(v) for k, v in row.items()} for row in rows)
+        writer.writerows(rows)
     os.replace(tmp, path)
+    return path
 
 
 def add_sweep_options(parser) -> None:
@@ -73,33 +84,68 @@ def add_sweep_options(parser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
-def record_sweep(runs, root, record_csv, fields: list[str]) -> int:
-    """Copy the ok rows of ``root/sweep.csv`` that ``record_csv`` lacks into it (their labels, then steps, return,
-    clock, commit and command), rounding each run's progress.csv; returns how many were added."""
-    key = [field for field in fields if field in runs[0].labels] if runs else []
-    by_key = {tuple(str(run.labels[k]) for k in key): run for run in runs}
+def check_steps(steps: int, least: int = 2048) -> None:
+    if steps < least:
+        fail(f"--steps must be at least one horizon ({least}), not {steps}")
+
+
+def label_key(runs, fields) -> list[str]:
+    """The record's columns that name a run: its labels, in the record's order."""
+    return [field for field in fields if runs and field in runs[0].labels]
+
+
+def todo(runs, record_csv, fields) -> list:
+    """The runs that ``record_csv`` does not hold yet."""
+    key = label_key(runs, fields)
     recorded = {tuple(row[k] for k in key) for row in read_rows(record_csv)}
+    return [run for run in runs if tuple(str(run.labels[k]) for k in key) not in recorded]
+
+
+def show_list(runs, record_csv, fields) -> int:
+    """``--list``: every run, recorded (with its scores) or still to do."""
+    key = label_key(runs, fields)
+    done = {tuple(row[k] for k in key): row for row in read_rows(record_csv)}
+    shown = [{k: f"seed {run.labels[k]}" if k == "seed" else str(run.labels[k]) for k in key} for run in runs]
+    widths = {k: max(len(labels[k]) for labels in shown) for k in key}
+    for run, labels in zip(runs, shown):
+        row = done.get(tuple(str(run.labels[k]) for k in key), {})
+        label = "  ".join(f"{labels[k]:<{widths[k]}}" for k in key)
+        scores = "".join(f"  {name[:-5]} {row[name]:>9}" for name in ("return_mean", "eval_mean") if name in row)
+        print(f"{'recorded' if row else 'to do':<8}  {label}{scores}")
+    return 0
+
+
+def record_sweep(runs, root, record_csv, fields: list[str], more=None) -> int:
+    """Copy the ok rows of ``root/sweep.csv`` that ``record_csv`` lacks into it (their labels, then steps, return,
+    clock, commit and command, and ``more(folder)``'s columns), rounding each run's progress.csv; returns how many
+    were added."""
+    key = label_key(runs, fields)
+    left = {tuple(str(run.labels[k]) for k in key): run for run in todo(runs, record_csv, fields)}
     added = 0
     for row in read_rows(Path(root) / "sweep.csv"):
-        run = by_key.get(tuple(row[k] for k in key))
-        if row["status"] != "ok" or run is None or tuple(row[k] for k in key) in recorded:
+        run = left.pop(tuple(row[k] for k in key), None) if row["status"] == "ok" else None
+        if run is None:
             continue
+        extra = more(Path(root) / run.name) if more else {}
         compact_progress(Path(root) / run.name)
         numbers = {"steps": int(row["steps"]), "return_mean": round(float(row["return_mean"]), 2)}
         numbers |= {"wall_s": round(float(row["wall_s"]), 1), "steps_per_s": round(float(row["steps_per_s"]), 1)}
-        append_row(record_csv, fields, {**run.labels, **numbers, "commit": row["commit"], "command": row["command"]})
-        recorded.add(tuple(row[k] for k in key))
+        numbers |= {**extra, "commit": row["commit"], "command": row["command"]}
+        append_row(record_csv, fields, {**run.labels, **numbers})
         added += 1
     return added
 
 
-def run_sweep(runs, root, record_csv, fields: list[str], args) -> int:
+def run_sweep(runs, root, record_csv, fields: list[str], args, engine=None, more=None) -> int:
     """Run the ``runs`` that ``record_csv`` does not hold on minippo sweep's engine into the folder ``root`` (each
-    run, failed ones too, is logged in ``root/sweep.csv`` with the node it ran on), then record the finished ones.
-    Returns the exit code."""
+    run, failed ones too, is logged in ``root/sweep.csv`` with the node it ran on), then record the finished ones
+    (``more``: see ``record_sweep``); with ``args.list``, only show what is recorded and what is left. ``engine``: a
+    ``minippo.sweep.Sweep`` maker whose ``finish`` writes the record itself. Returns the exit code."""
     from minippo.errors import MinippoError
     from minippo.sweep import Sweep
 
+    if getattr(args, "list", False):
+        return show_list(runs, record_csv, fields)
     if args.workers is not None and args.workers < 1:
         fail(f"--workers must be at least 1, not {args.workers}")
     try:
@@ -107,17 +153,21 @@ def run_sweep(runs, root, record_csv, fields: list[str], args) -> int:
     except MinippoError as error:
         fail(str(error))
     root = relative(root)  # the commands in the records name the folder from the repository's root
-    record_sweep(runs, root, record_csv, fields)  # runs an interrupted invocation finished
-    key = [field for field in fields if runs and field in runs[0].labels]
-    recorded = {tuple(row[k] for k in key) for row in read_rows(record_csv)}
-    todo = [run for run in runs if tuple(str(run.labels[k]) for k in key) not in recorded]
-    job = Sweep(todo, root, workers=args.workers, address=args.address, retries=args.retries, quiet=args.quiet)
+    if engine is None:
+        record_sweep(runs, root, record_csv, fields, more)  # runs an interrupted invocation finished
+    left = todo(runs, record_csv, fields)
+    if not left:
+        print(f"all {len(runs)} runs are recorded in {relative(record_csv)}")
+        return 0
+    options = dict(workers=args.workers, address=args.address, retries=args.retries, quiet=args.quiet)
+    job = (engine or Sweep)(left, root, **options)
     try:
-        code = 1 if todo and job.run() else 0
+        code = 1 if job.run() else 0
     except MinippoError as error:
         fail(str(error))
     except KeyboardInterrupt:
         print(f"interrupted; {job.recorded} runs recorded; the same command continues", file=sys.stderr)
         code = 130
-    record_sweep(runs, root, record_csv, fields)
+    if engine is None:
+        record_sweep(runs, root, record_csv, fields, more)
     return code

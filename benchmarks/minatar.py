@@ -3,29 +3,22 @@
     python -m benchmarks.minatar --steps N       # every (algorithm, game, seed) not yet recorded, then the table
     python -m benchmarks.minatar --score         # only recompute benchmarks/results/minatar.csv from the records
 
-PPO runs with the paper's Atari settings (``--preset atari``, its Table 5), A2C with ``--preset a2c``; both on the
-same convolutional network (minippo/presets.py says where each differs from the paper). The paper scores Atari two
-ways: the mean episode return over all of training, and the mean over the last 100 episodes; a game is won by the
-algorithm with the higher mean over seeds. Each run's episode returns are written to ``episodes.csv`` in its folder
-(from its final checkpoint), so both scores can be recomputed from committed files.
-
---steps has no default: choose it so that 5 games × 3 seeds × 2 algorithms fit the time you have, from the measured
-speed (benchmarks/speed.py --minatar): steps = hours × 3600 × workers × steps/s / 30.
-
-Each run is what ``minippo train ENV --steps N --seed S --out benchmarks/runs/minatar/<alg>-ENV-seedS --quiet
---preset <alg>`` runs, as a Ray task of one CPU, recorded in benchmarks/results/minatar_runs.csv; recorded runs are
-skipped, so the same command resumes.
+PPO runs with ``--preset atari`` (the paper's Table 5), A2C with ``--preset a2c``, on the same network. Both of the
+paper's scores: the mean episode return over all of training and over the last 100 episodes (from each run's
+``episodes.csv``); a game is won by the higher mean over seeds. For --steps, from the measured speed (``python -m
+benchmarks.speed --env MinAtar/Breakout-v1``): steps = hours × 3600 × workers × steps/s / 30. Each run is ``minippo
+train ENV --steps N --seed S --out benchmarks/runs/minatar/<alg>-ENV-seedS --quiet --preset <alg>``, recorded in
+benchmarks/results/minatar_runs.csv; recorded runs are skipped.
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
 from pathlib import Path
 
 import numpy as np
 
-from benchmarks import common
+from benchmarks import common, scoring
 from minippo.errors import MinippoError
 from minippo.records import read_rows
 
@@ -66,10 +59,8 @@ def write_episodes(run_dir: Path) -> None:
         return
     with np.load(run_dir / "checkpoint.npz", allow_pickle=False) as data:
         returns, lengths = data["returns"], data["lengths"]
-    with open(target, "w", newline="") as handle:
-        writer = csv.writer(handle, lineterminator="\n")
-        writer.writerow(["return", "length"])
-        writer.writerows((f"{r:g}", int(n)) for r, n in zip(returns, lengths))
+    episodes = [{"return": f"{value:g}", "length": int(length)} for value, length in zip(returns, lengths)]
+    common.write_rows(target, episodes, ["return", "length"])
 
 
 def scores(run_dir: Path) -> tuple[float, float]:
@@ -96,10 +87,7 @@ def write_table(runs_csv, root, table_csv, envs, seeds) -> list[dict]:
             ppo, a2c = row[f"PPO_{rule}"], row[f"A2C_{rule}"]
             row[f"winner_{rule}"] = "" if np.isnan(ppo) or np.isnan(a2c) else "PPO" if ppo > a2c else "A2C"
         table.append(row)
-    with open(table_csv, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(table[0]), lineterminator="\n")
-        writer.writeheader()
-        writer.writerows(table)
+    scoring.write(Path(table_csv).stem, table, Path(table_csv).parent)
     return table
 
 

@@ -3,27 +3,24 @@ settings (the paper's MuJoCo settings), the same seeds, on the same machine, as 
 
     python -m benchmarks.peers                       # 3 tasks × seeds 1–5 × 2 libraries × 1M steps: 30 runs
     python -m benchmarks.peers --tasks Hopper-v5 --seeds 1 2 --libraries sb3
-    python -m benchmarks.peers --address HOST:PORT   # on a running Ray cluster
     python -m benchmarks.peers --list                # what is recorded, what is left
 
-Every run is a Ray task of one CPU and one math thread (one BLAS thread for minippo, one torch thread for SB3). A
-minippo run is exactly ``minippo train TASK --steps N --seed S`` (the defaults are the paper's settings); an SB3 run
-is ``stable_baselines3.PPO`` with every setting translated from the same ``Config`` by ``sb3_settings`` (the README
-of benchmarks/ tabulates how each setting was matched, and where the two cannot match). Both are scored the same
-way: the mean return of the last 100 training episodes (original rewards), and the mean return of the final
-policy's deterministic actions over 10 episodes (reset seeds 0–9, observation statistics frozen). When a run
-finishes, one row goes to benchmarks/results/peers.csv and its folder to benchmarks/runs/peers/<library>-TASK-seedS/
-(minippo's as ``minippo train`` writes it; SB3's with the learning curve in the same progress.csv columns and its
-settings in config.json). Recorded runs are skipped, so the same command resumes.
+A minippo run is ``minippo train TASK --steps N --seed S``; an SB3 run is ``stable_baselines3.PPO`` with every
+setting translated from the same ``Config`` by ``sb3_settings`` (benchmarks/README.md tabulates how each was matched).
+Both are scored on the last 100 training episodes and on 10 deterministic episodes of the final policy, one row per
+run in benchmarks/results/peers.csv; recorded runs are skipped.
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import importlib.util
 import json
 import os
+import shlex
 import socket
+import statistics
 import sys
 import tempfile
 import time
@@ -39,15 +36,10 @@ TASKS = ["Hopper-v5", "HalfCheetah-v5", "Walker2d-v5"]
 SEEDS = [1, 2, 3, 4, 5]
 STEPS = 1_000_000
 LIBRARIES = ["minippo", "sb3"]
-NAMES = {"minippo": "minippo", "sb3": "Stable-Baselines3"}
 EVAL_EPISODES, EVAL_SEED = 10, 0  # minippo eval's defaults: episode k is reset with seed EVAL_SEED + k
 FIELDS = ["library", "version", "task", "seed", "steps", "return_mean", "eval_mean", "wall_s", "commit", "command"]
-KEY = ("library", "task", "seed")
 CSV_PATH = common.RESULTS / "peers.csv"
 RUN_ROOT = common.RUNS / "peers"
-SB3_MISSING = (
-    'Stable-Baselines3 is not installed: pip install torch==2.13.0 (the CPU wheel) and then pip install -e ".[peers]"'
-)
 
 
 # SB3's settings, from minippo's Config
@@ -167,71 +159,50 @@ def sb3_run(config_dict: dict, name: str = "", board=None) -> dict:
     rows: list[dict] = []
 
     class Progress(BaseCallback):
-        """One row per update, written once the update is done (when the next rollout starts, or at the end)."""
+        """One row per update, added once the update is done: when the next rollout starts, or after training."""
 
         def __init__(self):
             super().__init__()
-            self.started, self.pending, self.episodes = time.perf_counter(), None, 0
+            self.started, self.episodes = time.perf_counter(), 0
 
         def _on_step(self) -> bool:
             self.episodes += sum(1 for info in self.locals["infos"] if "episode" in info)  # Monitor's episode ends
             return True
 
-        def _on_rollout_end(self) -> None:
-            returns = [info["r"] for info in self.model.ep_info_buffer]  # the last 100 episodes, original rewards
-            self.pending = {
-                "update": len(rows) + 1,
-                "step": self.model.num_timesteps,
-                "episodes": self.episodes,
-                "return_mean": float(np.mean(returns)) if returns else float("nan"),
-            }
-
         def _on_rollout_start(self) -> None:
-            self.flush()
+            if self.model.num_timesteps:  # not before the first rollout
+                self.add_row()
 
-        def flush(self) -> None:
-            if self.pending is None:
-                return
-            wall = time.perf_counter() - self.started
-            row = {**self.pending, "lr": self.model.policy.optimizer.param_groups[0]["lr"], "wall_s": wall}
-            row["steps_per_s"] = row["step"] / wall
+        def add_row(self) -> None:
+            returns = [info["r"] for info in self.model.ep_info_buffer]  # the last 100 episodes, original rewards
+            wall, step = time.perf_counter() - self.started, self.model.num_timesteps
+            row = {"update": len(rows) + 1, "step": step, "episodes": self.episodes}
+            row["return_mean"] = float(np.mean(returns)) if returns else float("nan")
+            row |= {"lr": self.model.policy.optimizer.param_groups[0]["lr"], "steps_per_s": step / wall, "wall_s": wall}
             rows.append(row)
-            self.pending = None
             if board is not None:
-                board.report.remote(name, row["step"], total, row["return_mean"])
+                board.report.remote(name, step, total, row["return_mean"])
 
     with threadpool_limits(1):
         model, env = sb3_model(config)
         progress = Progress()
         model.learn(total_timesteps=total, callback=progress)
-        progress.flush()
+        progress.add_row()
         episodes = sb3_evaluate(model, env, config.env_id, EVAL_EPISODES, EVAL_SEED)
         env.close()
-    last = rows[-1]
     columns = ["update", "step", "episodes", "return_mean", "lr", "steps_per_s", "wall_s"]
     lines = [",".join(columns)] + [",".join(repr(row[key]) for key in columns) for row in rows]
     described = {"library": "stable-baselines3", "env_id": config.env_id, "seed": config.seed, **settings}
     described["ppo"]["learning_rate"] = (
         f"{rate['initial']} * (progress_remaining + {rate['plus']:.6g})" if rate["anneal"] else rate["initial"]
     )
-    node = ""
-    if "ray" in sys.modules:
-        import ray
+    import ray  # a task of the sweep engine
 
-        if ray.is_initialized():
-            node = ray.get_runtime_context().get_node_id()[:12]
-    return {
-        "files": {
-            "config.json": (json.dumps(described, indent=2) + "\n").encode(),
-            "progress.csv": ("\n".join(lines) + "\n").encode(),
-        },
-        "last": last,
-        "eval": episodes,
-        "version": f"stable-baselines3 {stable_baselines3.__version__}, torch {torch.__version__}",
-        "node": node,
-        "host": socket.gethostname(),
-        "pid": os.getpid(),
-    }
+    node = ray.get_runtime_context().get_node_id()[:12] if ray.is_initialized() else ""
+    files = {"config.json": json.dumps(described, indent=2) + "\n", "progress.csv": "\n".join(lines) + "\n"}
+    version = f"stable-baselines3 {stable_baselines3.__version__}, torch {torch.__version__}"
+    result = {"files": {key: text.encode() for key, text in files.items()}, "last": rows[-1], "eval": episodes}
+    return result | {"version": version, "node": node, "host": socket.gethostname(), "pid": os.getpid()}
 
 
 def sb3_evaluate(model, venv, env_id: str, episodes: int, seed: int) -> list[float]:
@@ -278,7 +249,7 @@ class PeerRun(Run):
         argv += ["--seeds", str(config.seed), "--steps", str(config.total_steps)]
         if str(out_dir) != common.relative(RUN_ROOT):
             argv += ["--runs", str(out_dir)]
-        return common.shell_text(argv)
+        return shlex.join(argv)
 
 
 def sweep_runs(tasks, seeds, steps, libraries=LIBRARIES) -> list[PeerRun]:
@@ -293,21 +264,15 @@ def sweep_runs(tasks, seeds, steps, libraries=LIBRARIES) -> list[PeerRun]:
     return runs
 
 
-def mean(values) -> float:
-    values = [float(value) for value in values]
-    return sum(values) / len(values) if values else float("nan")
-
-
 class PeerSweep(Sweep):
     """minippo sweep's engine with ``peer_run`` as its task, and each finished run also recorded in peers.csv (the
     row needs the task's evaluation and library version, which the engine's own sweep row does not carry)."""
 
     task = staticmethod(peer_run)
 
-    def __init__(self, runs, root, record_csv, args):
-        super().__init__(runs, root, workers=args.workers, address=args.address, retries=args.retries, quiet=args.quiet)
-        self.record_csv = record_csv
-        self.commit = code_commit()
+    def __init__(self, runs, root, record_csv, **options):
+        super().__init__(runs, root, **options)
+        self.record_csv, self.commit = record_csv, code_commit()
 
     def finish(self, run, result, error, attempts) -> dict:
         row = super().finish(run, result, error, attempts)
@@ -319,18 +284,10 @@ class PeerSweep(Sweep):
 
 def peer_row(run, row: dict, result: dict) -> dict:
     """A peers.csv row from the engine's sweep row and the task's result."""
-    return {
-        "library": run.labels["library"],
-        "version": result["version"],
-        "task": run.labels["task"],
-        "seed": run.labels["seed"],
-        "steps": int(row["steps"]),
-        "return_mean": round(float(row["return_mean"]), 2),
-        "eval_mean": round(mean(result["eval"]), 2),
-        "wall_s": round(float(row["wall_s"]), 1),
-        "commit": row["commit"],
-        "command": row["command"],
-    }
+    train, evaluation = round(float(row["return_mean"]), 2), round(statistics.fmean(result["eval"]), 2)
+    record = {"library": run.labels["library"], "version": result["version"], "task": run.labels["task"]}
+    record |= {"seed": run.labels["seed"], "steps": int(row["steps"]), "return_mean": train, "eval_mean": evaluation}
+    return record | {"wall_s": round(float(row["wall_s"]), 1), "commit": row["commit"], "command": row["command"]}
 
 
 def code_commit() -> str:
@@ -378,7 +335,7 @@ def evaluate_record(runs_csv, runs_root, record_csv, tasks=TASKS) -> int:
             common.fail(f"no policy.npz in {folder}: the final policies stay on the machine that trained them")
         returns = evaluate(folder, EVAL_EPISODES, EVAL_SEED)
         row = {"library": "minippo", "version": minippo_version(), "task": run["env"], **run}
-        row["eval_mean"] = round(sum(returns) / len(returns), 2)
+        row["eval_mean"] = round(statistics.fmean(returns), 2)
         append_row(record_csv, FIELDS, row)
         added += 1
     return added
@@ -400,42 +357,19 @@ def main(argv=None) -> int:
         added = evaluate_record(args.evaluate, args.runs, args.csv, args.tasks)
         print(f"{added} minippo runs evaluated -> {common.relative(args.csv)}")
         return 0
-    if args.steps < 2048:
-        common.fail(f"--steps must be at least one horizon (2048), not {args.steps}")
+    common.check_steps(args.steps)
     if len(set(args.seeds)) != len(args.seeds) or len(set(args.tasks)) != len(args.tasks):
         common.fail("a task or a seed is named twice")
     runs = sweep_runs(args.tasks, args.seeds, args.steps, [name for name in LIBRARIES if name in args.libraries])
     if args.list:
-        done = {tuple(row[k] for k in KEY): row for row in read_rows(args.csv)}
-        for run in runs:
-            row = done.get(run.key())
-            label = f"{run.labels['library']:<8} {run.labels['task']:<16} seed {run.labels['seed']}"
-            if row:
-                print(f"recorded  {label}  return {row['return_mean']:>9}  eval {row['eval_mean']:>9}")
-            else:
-                print(f"to do     {label}")
-        return 0
+        return common.show_list(runs, args.csv, FIELDS)
     check_tasks(args.tasks)
     if "sb3" in args.libraries and importlib.util.find_spec("stable_baselines3") is None:
-        common.fail(SB3_MISSING)
-    if args.workers is not None and args.workers < 1:
-        common.fail(f"--workers must be at least 1, not {args.workers}")
+        install = 'pip install torch==2.13.0 (the CPU wheel) and then pip install -e ".[peers]"'
+        common.fail(f"Stable-Baselines3 is not installed: {install}")
     ship_by_value()
-    from minippo.errors import MinippoError
-
-    recorded = {tuple(row[k] for k in KEY) for row in read_rows(args.csv)}
-    todo = [run for run in runs if run.key() not in recorded]
-    if not todo:
-        print(f"all {len(runs)} runs are recorded in {common.relative(args.csv)}")
-        return 0
-    job = PeerSweep(todo, common.relative(args.runs), args.csv, args)
-    try:
-        return 1 if job.run() else 0
-    except MinippoError as error:
-        common.fail(str(error))
-    except KeyboardInterrupt:
-        print(f"interrupted; {job.recorded} runs recorded; the same command continues", file=sys.stderr)
-        return 130
+    engine = functools.partial(PeerSweep, record_csv=args.csv)
+    return common.run_sweep(runs, args.runs, args.csv, FIELDS, args, engine=engine)
 
 
 if __name__ == "__main__":

@@ -9,7 +9,6 @@ benchmarks/results/random.csv; a task already recorded with the same episodes an
 from __future__ import annotations
 
 import argparse
-import shlex
 
 from benchmarks import common
 from benchmarks.scoring import RANDOM_EPISODES, RANDOM_SEED
@@ -64,26 +63,10 @@ def main(argv=None) -> int:
             print(f"{env_id}: already recorded")
             continue
         returns, lengths = random_returns(env_id, args.episodes, args.seed)
-        command = shlex.join(
-            [
-                "python",
-                "-m",
-                "benchmarks.random_policy",
-                env_id,
-                "--episodes",
-                str(args.episodes),
-                "--seed",
-                str(args.seed),
-            ]
-        )
-        row = {
-            **key,
-            "return_mean": round(float(np.mean(returns)), 3),
-            "return_std": round(float(np.std(returns)), 3),
-            "length_mean": round(float(np.mean(lengths)), 1),
-            "commit": common.git_commit(),
-            "command": command,
-        }
+        argv = [env_id, "--episodes", str(args.episodes), "--seed", str(args.seed)]
+        row = {**key, "return_mean": round(float(np.mean(returns)), 3), "return_std": round(float(np.std(returns)), 3)}
+        row |= {"length_mean": round(float(np.mean(lengths)), 1), "commit": common.git_commit()}
+        row["command"] = common.invocation("random_policy", argv)
         append_row(args.csv, FIELDS, row)
         print(f"{env_id}: random policy {row['return_mean']} ± {row['return_std']} over {args.episodes} episodes")
     return 0

@@ -2,8 +2,9 @@
 
     python -m benchmarks.report             # score the records, then write summary.md, the figures and the README block
 
-Each section of summary.md is a paragraph written once (below, in SECTIONS) and a table computed by
-benchmarks/scoring.py: the paragraphs say what a table holds and how it was made, never what its numbers are.
+summary.md is benchmarks/summary_template.md, paragraphs written once by a person that say what each table holds and
+how it was made (never what its numbers are), with each ``<!-- table:NAME -->`` replaced by the table NAME that
+benchmarks/scoring.py computes.
 """
 
 from __future__ import annotations
@@ -17,27 +18,13 @@ from benchmarks.common import RESULTS, ROOT, RUNS, fail
 from minippo.plotting import INK, ORANGE, SAGE, draw_seed_band, read_progress, seed_curves
 from minippo.records import read_rows
 
-SEVEN = {
-    "Task": "{task}",
-    "record": "`{record}`",
-    "minippo, mean ± sd": "{mean:,.1f} ± {sd:,.1f}",
-    "seeds' returns": "{returns}",
-    "paper (Fig. 3, ≈)": "{paper}",
-    "CleanRL (v4)": "{cleanrl}",
-    "≥ paper's low end": "{at_or_above_paper}",
-    "min per run": "{minutes}",
-    "commits": "{commits}",
-}
-PEERS = {
-    "Task": "{task}",
-    "score": "{score}",
-    "minippo": "{minippo_mean:,.0f} ± {minippo_se:,.0f}",
-    "SB3": "{sb3_mean:,.0f} ± {sb3_se:,.0f}",
-    "seeds": "{seeds}",
-    "minippo − SB3 [95%]": "{diff:+,.0f} [{low:+,.0f}, {high:+,.0f}]",
-    "standing": "{standing}",
-    "min per run (minippo / SB3)": "{minippo_minutes} / {sb3_minutes}",
-}
+SEVEN = {"Task": "{task}", "record": "`{record}`", "minippo, mean ± sd": "{mean:,.1f} ± {sd:,.1f}"}
+SEVEN |= {"seeds' returns": "{returns}", "paper (Fig. 3, ≈)": "{paper}", "CleanRL (v4)": "{cleanrl}"}
+SEVEN |= {"≥ paper's low end": "{at_or_above_paper}", "min per run": "{minutes}", "commits": "{commits}"}
+PEERS = {"Task": "{task}", "score": "{score}", "minippo": "{minippo_mean:,.0f} ± {minippo_se:,.0f}"}
+PEERS |= {"SB3": "{sb3_mean:,.0f} ± {sb3_se:,.0f}", "seeds": "{seeds}"}
+PEERS |= {"minippo − SB3 [95%]": "{diff:+,.0f} [{low:+,.0f}, {high:+,.0f}]", "standing": "{standing}"}
+PEERS |= {"min per run (minippo / SB3)": "{minippo_minutes} / {sb3_minutes}"}
 TABLE1 = {"Setting": "{setting}", "score ± se": "{score:.2f} ± {score_se}", "paper": "{paper_score:.2f}"}
 TABLE1 |= {"runs": "{runs}", "tasks": "{tasks}"}
 SCALE = {"Setting": "{setting}", "record": "{record}", "score ± se": "{score:.2f} ± {score_se:.2f}"}
@@ -47,67 +34,12 @@ SPEED |= {"× SB3": "{vs_sb3}", "version": "{version}", "machine": "{machine}", 
 SAME = {"Task": "{env}", "seed": "{seed}", "dtype": "{dtype}", "commits": "{earlier_commit} → {commit}"}
 SAME |= {"rel. difference, update 1": "{difference_at_update_1}", "parted (> 1%) at update": "{parted_at_update}"}
 
-SECTIONS = [
-    (
-        "Seven MuJoCo tasks, 1M steps, the paper's settings",
-        "Each row is one task of one record: `mujoco.csv` (the seven-task campaign) and the ε = 0.2 runs of "
-        "`table1_1m_runs.csv`, which are `minippo train ENV --steps 1000000 --seed S` with the default objective "
-        "spelt out, made at later code. A run's return is the mean of its last 100 training episodes; the sd is over "
-        "seeds. The paper's column is its Figure 3 at 1M steps as read off the plots (approximate, v1 tasks of "
-        "2017); CleanRL's is its published `ppo_continuous_action.py` benchmark on the v4 tasks (mean ± sd of 3 "
-        "seeds). The minutes are each run's own clock with a second training sharing the two cores.",
-        "seven_tasks",
-        SEVEN,
-        "mujoco_curves.png",
-    ),
-    (
-        "minippo beside Stable-Baselines3",
-        "`python -m benchmarks.peers`: both libraries with the paper's settings on the same machine, 5 seeds, 1M "
-        "steps. train is the mean of the last 100 training episodes, eval 10 deterministic episodes of the final "
-        "policy; each cell is the mean ± standard error over seeds, and the interval is Welch's 95% interval for the "
-        "difference (a standing other than level needs an interval that excludes zero).",
-        "peers",
-        PEERS,
-        "peers_curves.png",
-    ),
-    (
-        "Table 1 at 1M steps",
-        "The paper's eleven surrogate settings on its seven tasks, 3 seeds each, scored as in the paper: per task the "
-        "random policy is 0 and the best run of any setting is 1 (`table1_1m_runs.csv`, `random.csv`).",
-        "table1_1m",
-        TABLE1,
-        "table1_1m.png",
-    ),
-    (
-        "Table 1 with and without the three details",
-        "The same settings run again with `--config grad_norm_clipping=false clip_value_loss=false "
-        "scale_rewards=false` (`table1_1m_paperimpl_runs.csv`: the implementation as the paper describes it), scored "
-        "with the defaults' runs on one scale (the best run of either record is 1).",
-        "table1_1m_two_implementations",
-        SCALE,
-        None,
-    ),
-    (
-        "Table 1 with three more seeds",
-        "Settings of the 1M-step table run again with seeds 4–6 (`table1_1m_more_seeds_runs.csv`), on one scale with "
-        "the table's seeds 1–3.",
-        "table1_1m_more_seeds",
-        SCALE,
-        None,
-    ),
-    (
-        "Same training, other code",
-        "`python -m benchmarks.same_math EARLIER` trains a few updates at an earlier commit and at the current one, in "
-        "one process each, and compares them update by update (`same_math.csv`). Agreement to rounding at update 1 "
-        "means the same algorithm; afterwards rounding differences grow until the runs are two samples of it.",
-        "same_math",
-        SAME,
-        None,
-    ),
-]
+COLUMNS = {"seven_tasks": SEVEN, "peers": PEERS, "table1_1m": TABLE1, "table1_1m_two_implementations": SCALE}
+COLUMNS |= {"table1_1m_more_seeds": SCALE, "same_math": SAME}
+TEMPLATE = Path(__file__).with_name("summary_template.md")
 
 
-def figure_seven_tasks(rows: list[dict], out: Path, runs_root=RUNS / "mujoco") -> None:
+def figure_seven_tasks(rows: list[dict], out: Path, runs_root=RUNS / "seven_tasks") -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(2, 4, figsize=(13, 5.6), dpi=100)
@@ -123,7 +55,8 @@ def figure_seven_tasks(rows: list[dict], out: Path, runs_root=RUNS / "mujoco") -
     save(fig, out)
 
 
-def figure_peers(rows: list[dict], out: Path, runs_root=RUNS / "peers") -> None:
+def figure_peers(rows: list[dict], out: Path, runs_root=RUNS / "peers", minippo_root=RUNS / "seven_tasks") -> None:
+    """SB3's curves from the side-by-side runs, minippo's from the seven-task runs its side reads."""
     import matplotlib.pyplot as plt
 
     tasks = list(dict.fromkeys(row["task"] for row in rows))
@@ -131,7 +64,13 @@ def figure_peers(rows: list[dict], out: Path, runs_root=RUNS / "peers") -> None:
     for ax, task in zip(axes[0], tasks):
         for library, colour in (("minippo", ORANGE), ("sb3", SAGE)):
             seeds = [r["seed"] for r in rows if r["task"] == task and r["library"] == library]
-            runs = [read_progress(Path(runs_root) / f"{library}-{task}-seed{seed}") for seed in seeds]
+            folders = [
+                Path(minippo_root) / f"{task}-seed{seed}"
+                if library == "minippo"
+                else Path(runs_root) / f"sb3-{task}-seed{seed}"
+                for seed in seeds
+            ]
+            runs = [read_progress(folder) for folder in folders]
             curves = seed_curves(runs)
             if curves is not None:
                 draw_seed_band(ax, *curves, colour, f"{library}, {len(runs)} seeds")
@@ -167,17 +106,15 @@ def save(fig, out: Path) -> None:
 
 
 def summary_text(tables: dict[str, list[dict]]) -> str:
-    parts = ["# Benchmark summary", "", "Written by `python -m benchmarks.report` from the records in this folder."]
-    for title, paragraph, name, columns, figure in SECTIONS:
-        parts += ["", f"## {title}", "", paragraph, ""]
-        parts.append(scoring.markdown(tables[name], columns) if tables.get(name) else "No complete record yet.")
-        if figure:
-            parts += ["", f"![{title}]({figure})"]
-    return "\n".join(parts) + "\n"
+    def table(match):
+        name = match.group(1)
+        return scoring.markdown(tables[name], COLUMNS[name]) if tables.get(name) else "No complete record yet."
+
+    return re.sub(r"<!-- table:(\w+) -->", table, TEMPLATE.read_text())
 
 
 def readme_blocks(tables: dict[str, list[dict]], speed: list[dict]) -> dict[str, str]:
-    seven = [row for row in tables["seven_tasks"] if row["record"] == "mujoco.csv"]
+    seven = [row for row in tables["seven_tasks"] if row["record"] == "seven_tasks_runs.csv"]
     columns = {k: SEVEN[k] for k in ("Task", "minippo, mean ± sd", "paper (Fig. 3, ≈)", "CleanRL (v4)")}
     return {
         "mujoco": scoring.markdown(seven, columns),
@@ -201,8 +138,9 @@ def main(argv=None) -> int:
     matplotlib.use("Agg")
     tables = scoring.score_all()
     (RESULTS / "summary.md").write_text(summary_text(tables))
-    figure_seven_tasks(read_rows(RESULTS / "mujoco.csv"), RESULTS / "mujoco_curves.png")
-    figure_peers(read_rows(RESULTS / "peers.csv"), RESULTS / "peers_curves.png")
+    figure_seven_tasks(read_rows(RESULTS / "seven_tasks_runs.csv"), RESULTS / "mujoco_curves.png")
+    peer_rows = [row for row in read_rows(RESULTS / "peers.csv") if row["library"] == "sb3"]
+    figure_peers(peer_rows + read_rows(RESULTS / "peers_minippo.csv"), RESULTS / "peers_curves.png")
     figure_table1(tables["table1_1m"], RESULTS / "table1_1m.png")
     readme = ROOT / "README.md"
     try:

@@ -1,23 +1,17 @@
 """Does the current minippo compute the same training as an earlier commit? A short run of each, side by side.
 
-The speed work rewrote the rollout and the update (fewer NumPy calls, Python floats in the per-step recurrences,
-one gather per epoch). Those rewrites are meant to change how the numbers are computed, not which numbers. This
-script checks that: it checks out the earlier commit into a temporary git worktree, trains the same task with the
-same seed for a few updates at both commits in float64 (one BLAS thread each, one after the other), and writes each
-update's statistics from both runs and their largest relative difference to a CSV.
-
-Same math means the two agree to rounding (about 1e-15 relative) at the first update. Rounding differences then
-grow, as they do in any training of a chaotic simulator, and after some updates the two runs are different samples
-of the same algorithm; the CSV shows where that happens. A changed algorithm (another loss, another normalisation,
-another random draw) shows as a difference far above rounding at update 1.
-
     python -m benchmarks.same_math 92bb26d --env InvertedDoublePendulum-v5 --seed 1 --updates 20
+
+The earlier commit is checked out into a temporary git worktree; both codes train the same task and seed for a few
+updates (one BLAS thread each, one after the other), and each update's statistics from both runs and their largest
+relative difference go to a CSV. Same math agrees to rounding (about 1e-15 relative in float64) at update 1; a
+changed loss, normalisation or random draw shows far above rounding there. Rounding differences then grow until the
+two runs are different samples of the same algorithm.
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
 import os
 import subprocess
 import sys
@@ -76,14 +70,11 @@ def main(argv=None) -> int:
     parser.add_argument("--updates", type=int, default=20)
     parser.add_argument("--dtype", choices=("float64", "float32"), default="float64")
     parser.add_argument(
-        "--csv",
-        default=str(CSV_PATH),
-        help="the record; rows of an earlier comparison of the same commit, task, seed and dtype are replaced",
+        "--csv", default=str(CSV_PATH), help="the record (an earlier comparison of the same is replaced)"
     )
     args = parser.parse_args(argv)
     if not 1 <= args.updates <= 500:
         common.fail(f"--updates must be between 1 and 500, not {args.updates}")
-    command = "python -m benchmarks.same_math " + common.shell_text(sys.argv[1:] if argv is None else argv)
     try:
         try:
             earlier = git("rev-parse", "--short", "--verify", "--quiet", f"{args.earlier}^{{commit}}")
@@ -103,15 +94,8 @@ def main(argv=None) -> int:
         common.fail(str(error))
     table = []
     for before, now in zip(earlier_rows, current_rows):
-        row = {
-            "env": args.env,
-            "seed": args.seed,
-            "dtype": args.dtype,
-            "update": now["update"],
-            "earlier_commit": earlier,
-            "commit": current,
-            "command": command,
-        }
+        row = {"env": args.env, "seed": args.seed, "dtype": args.dtype, "update": now["update"]}
+        row |= {"earlier_commit": earlier, "commit": current, "command": common.invocation("same_math", argv)}
         differences = []
         for column in COLUMNS:
             row[f"{column}_earlier"], row[f"{column}_current"] = before[column], now[column]
@@ -120,10 +104,7 @@ def main(argv=None) -> int:
         table.append(row)
     same = ("env", "seed", "dtype", "earlier_commit")
     kept = [old for old in read_rows(args.csv) if any(str(old[k]) != str(table[0][k]) for k in same)]
-    with open(args.csv, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=FIELDS)
-        writer.writeheader()
-        writer.writerows(kept + table)
+    common.write_rows(args.csv, kept + table, FIELDS)
     for row in table:
         print(f"update {row['update']:>3}: largest relative difference {row['max_relative_difference']}")
     print(f"{args.env} seed {args.seed}, {args.dtype}: {earlier} against {current} -> {common.relative(args.csv)}")

@@ -8,56 +8,22 @@ No sentences: the paragraphs around the tables are written once, by a person (be
 
 from __future__ import annotations
 
-import csv
 import math
 import statistics
 from collections import defaultdict
 from pathlib import Path
 
-from benchmarks.common import RESULTS, BenchmarkError, relative
+from benchmarks.common import RESULTS, BenchmarkError, relative, write_rows
 from minippo.records import read_rows
 
 TABLES = RESULTS / "tables"
-SEVEN_TASKS = [
-    "Hopper-v5",
-    "InvertedPendulum-v5",
-    "InvertedDoublePendulum-v5",
-    "Reacher-v5",
-    "Swimmer-v5",
-    "HalfCheetah-v5",
-    "Walker2d-v5",
-]
-# The paper's Table 1 scores (Schulman et al. 2017), in its row order; the settings' options are in table1.py.
-TABLE1_PAPER = {
-    "No clipping or penalty": -0.39,
-    "Clipping, ε = 0.1": 0.76,
-    "Clipping, ε = 0.2": 0.82,
-    "Clipping, ε = 0.3": 0.70,
-    "Adaptive KL, d_targ = 0.003": 0.68,
-    "Adaptive KL, d_targ = 0.01": 0.74,
-    "Adaptive KL, d_targ = 0.03": 0.71,
-    "Fixed KL, β = 0.3": 0.62,
-    "Fixed KL, β = 1": 0.71,
-    "Fixed KL, β = 3": 0.72,
-    "Fixed KL, β = 10": 0.69,
-}
-# Figure 3 of the paper, PPO (clip) at 1M steps, read off its plots (approximate): (low, high) of the readings.
-PAPER_FIGURE3 = {
-    "HalfCheetah-v5": (1800, 1800),
-    "Hopper-v5": (2200, 2300),
-    "InvertedDoublePendulum-v5": (8000, 8000),
-    "InvertedPendulum-v5": (1000, 1000),
-    "Reacher-v5": (-8, -5),
-    "Swimmer-v5": (110, 110),
-    "Walker2d-v5": (3000, 3400),
-}
-# CleanRL's ppo_continuous_action.py, MuJoCo v4, 1M steps, 3 seeds: (mean, std) from its published benchmark
-CLEANRL = {
-    "HalfCheetah-v5": (1442, 46),
-    "Hopper-v5": (2383, 272),
-    "Walker2d-v5": (2288, 572),
-    "InvertedPendulum-v5": (963, 22),
-}
+# Numbers typed in from their sources (benchmarks/README.md): per task in the paper's order, Figure 3 of the paper at
+# 1M steps as read off its plots (low, high) and CleanRL's published v4 benchmark (mean, sd); the paper's Table 1.
+PUBLISHED = {row["task"]: row for row in read_rows(RESULTS / "published_tasks.csv")}
+SEVEN_TASKS = list(PUBLISHED)
+PAPER_FIGURE3 = {task: (int(row["paper_low"]), int(row["paper_high"])) for task, row in PUBLISHED.items()}
+CLEANRL = {task: (int(r["cleanrl_mean"]), int(r["cleanrl_sd"])) for task, r in PUBLISHED.items() if r["cleanrl_mean"]}
+TABLE1_PAPER = {row["setting"]: float(row["paper_score"]) for row in read_rows(RESULTS / "published_table1.csv")}
 RANDOM_EPISODES, RANDOM_SEED = 100, 0
 STEPS_1M = 999_424  # 488 updates of 2048 steps
 
@@ -154,21 +120,15 @@ def table1(runs: list[dict], randoms: list[dict], tasks, seeds, steps: int) -> l
     if not runs:
         raise BenchmarkError("no setting or task has all its runs recorded yet")
     scores = normalized_scores(runs, random_returns(randoms))
-    return [
-        {
-            "setting": name,
-            "score": round(scores[name]["score"], 2),
-            "score_se": "" if scores[name]["se"] is None else round(scores[name]["se"], 2),
-            "paper_score": paper,
-            "runs": scores[name]["runs"],
-            "tasks": scores[name]["tasks"],
-            "task_ids": " ".join(env_id for env_id in tasks if env_id in scores[name]["per_task"]),
-            "seeds": len(seeds),
-            "steps": steps,
-        }
-        for name, paper in TABLE1_PAPER.items()
-        if name in scores
-    ]
+    table = []
+    for name, paper in TABLE1_PAPER.items():
+        if name in scores:
+            score, se = scores[name]["score"], scores[name]["se"]
+            row = {"setting": name, "score": round(score, 2), "score_se": "" if se is None else round(se, 2)}
+            row |= {"paper_score": paper, "runs": scores[name]["runs"], "tasks": scores[name]["tasks"]}
+            row["task_ids"] = " ".join(env_id for env_id in tasks if env_id in scores[name]["per_task"])
+            table.append(row | {"seeds": len(seeds), "steps": steps})
+    return table
 
 
 def on_one_scale(records: dict[str, list[dict]], randoms: list[dict]) -> list[dict]:
@@ -184,20 +144,15 @@ def on_one_scale(records: dict[str, list[dict]], randoms: list[dict]) -> list[di
     if not pool:
         return []
     scores = normalized_scores(pool, random_returns(randoms))
-    return [
-        {
-            "setting": setting,
-            "record": name,
-            "score": round(scores[(setting, name)]["score"], 3),
-            "score_se": round(scores[(setting, name)]["se"] or 0.0, 3),
-            "runs": scores[(setting, name)]["runs"],
-            "tasks": len(tasks),
-            "paper_score": paper,
-        }
-        for setting, paper in TABLE1_PAPER.items()
-        for name in records
-        if (setting, name) in scores
-    ]
+    table = []
+    for setting, paper in TABLE1_PAPER.items():
+        for name in records:
+            if (setting, name) in scores:
+                score = scores[(setting, name)]
+                row = {"setting": setting, "record": name, "score": round(score["score"], 3)}
+                row |= {"score_se": round(score["se"] or 0.0, 3), "runs": score["runs"], "tasks": len(tasks)}
+                table.append(row | {"paper_score": paper})
+    return table
 
 
 # the seven tasks, the side-by-side comparison, the rechecks
@@ -214,24 +169,18 @@ def seven_tasks(runs: list[dict], record: str) -> list[dict]:
         returns = [float(r["return_mean"]) for r in rows]
         mean, sd = mean_sd(returns)
         low, high = PAPER_FIGURE3[env_id]
-        table.append(
-            {
-                "record": record,
-                "task": env_id,
-                "seeds": len(rows),
-                "returns": " ".join(f"{value:.1f}" for value in returns),
-                "mean": round(mean, 1),
-                "sd": round(sd, 1),
-                "paper_low": low,
-                "paper_high": high,
-                "paper": f"{low}" if low == high else f"{low} to {high}",
-                "at_or_above_paper": "yes" if mean >= low else "no",
-                "cleanrl": "{} ± {}".format(*CLEANRL[env_id]) if env_id in CLEANRL else "—",
-                "minutes": round(statistics.fmean(float(r["wall_s"]) for r in rows) / 60, 1),
-                "commits": " ".join(sorted({r["commit"] for r in rows})),
-            }
-        )
+        row = {"record": record, "task": env_id, "seeds": len(rows), "returns": " ".join(f"{v:.1f}" for v in returns)}
+        row |= {"mean": round(mean, 1), "sd": round(sd, 1), "paper_low": low, "paper_high": high}
+        row["paper"] = f"{low}" if low == high else f"{low} to {high}"
+        row["at_or_above_paper"] = "yes" if mean >= low else "no"
+        row["cleanrl"] = "{} ± {}".format(*CLEANRL[env_id]) if env_id in CLEANRL else "—"
+        table.append(row | {"minutes": minutes(rows), "commits": " ".join(sorted({r["commit"] for r in rows}))})
     return table
+
+
+def minutes(runs: list[dict]) -> float:
+    """The mean minutes of a run, by the runs' own clocks."""
+    return round(statistics.fmean(float(run["wall_s"]) for run in runs) / 60, 1)
 
 
 def peers(rows: list[dict]) -> list[dict]:
@@ -247,21 +196,14 @@ def peers(rows: list[dict]) -> list[dict]:
         for score, column in (("train", "return_mean"), ("eval", "eval_mean")):
             a, b = [float(r[column]) for r in mine], [float(r[column]) for r in theirs]
             interval = welch_interval(a, b)
-            table.append(
-                {
-                    "task": task,
-                    "score": score,
-                    "minippo_mean": round(statistics.fmean(a), 1),
-                    "minippo_se": round(statistics.stdev(a) / math.sqrt(len(a)), 1),
-                    "sb3_mean": round(statistics.fmean(b), 1),
-                    "sb3_se": round(statistics.stdev(b) / math.sqrt(len(b)), 1),
-                    "seeds": f"{len(a)}/{len(b)}",
-                    **{key: round(interval[key], 1) for key in ("diff", "low", "high")},
-                    "standing": interval["standing"],
-                    "minippo_minutes": round(statistics.fmean(float(r["wall_s"]) for r in mine) / 60, 1),
-                    "sb3_minutes": round(statistics.fmean(float(r["wall_s"]) for r in theirs) / 60, 1),
-                }
-            )
+            row = {"task": task, "score": score}
+            for library, values in (("minippo", a), ("sb3", b)):
+                row[f"{library}_mean"] = round(statistics.fmean(values), 1)
+                row[f"{library}_se"] = round(statistics.stdev(values) / math.sqrt(len(values)), 1)
+            row["seeds"] = f"{len(a)}/{len(b)}"
+            row |= {key: round(interval[key], 1) for key in ("diff", "low", "high")}
+            row["standing"] = interval["standing"]
+            table.append(row | {"minippo_minutes": minutes(mine), "sb3_minutes": minutes(theirs)})
     return table
 
 
@@ -294,19 +236,9 @@ def same_math(rows: list[dict]) -> list[dict]:
     for (env_id, seed, dtype, earlier, commit), runs in groups.items():
         runs.sort(key=lambda row: int(row["update"]))
         parted = [int(r["update"]) for r in runs if float(r["max_relative_difference"]) > 0.01]
-        table.append(
-            {
-                "env": env_id,
-                "seed": seed,
-                "dtype": dtype,
-                "earlier_commit": earlier,
-                "commit": commit,
-                "updates": len(runs),
-                "difference_at_update_1": runs[0]["max_relative_difference"],
-                "parted_at_update": parted[0] if parted else "",
-                "command": runs[0]["command"],
-            }
-        )
+        row = {"env": env_id, "seed": seed, "dtype": dtype, "earlier_commit": earlier, "commit": commit}
+        row |= {"updates": len(runs), "difference_at_update_1": runs[0]["max_relative_difference"]}
+        table.append(row | {"parted_at_update": parted[0] if parted else "", "command": runs[0]["command"]})
     return table
 
 
@@ -315,15 +247,7 @@ def same_math(rows: list[dict]) -> list[dict]:
 
 def write(name: str, rows: list[dict], folder=TABLES) -> Path:
     """Write ``rows`` as ``folder/name.csv`` (whole, or not at all)."""
-    path = Path(folder) / f"{name}.csv"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp")
-    with open(tmp, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]) if rows else ["empty"], lineterminator="\n")
-        writer.writeheader()
-        writer.writerows(rows)
-    tmp.replace(path)
-    return path
+    return write_rows(Path(folder) / f"{name}.csv", rows)
 
 
 def markdown(rows: list[dict], columns: dict[str, str]) -> str:
@@ -344,8 +268,12 @@ def score_all(results=RESULTS, folder=TABLES) -> dict[str, list[dict]]:
     default_1m = record("table1_1m_runs.csv")
     eps02 = [r for r in default_1m if r["setting"] == "Clipping, ε = 0.2"]
     tables = {
-        "seven_tasks": seven_tasks(record("mujoco.csv"), "mujoco.csv") + seven_tasks(eps02, "table1_1m_runs.csv"),
-        "peers": peers(record("peers.csv")),
+        # the book's: 5 seeds at one commit; then the older records, kept for benchmarks/README
+        "seven_tasks": seven_tasks(record("seven_tasks_runs.csv"), "seven_tasks_runs.csv")
+        + seven_tasks(record("mujoco.csv"), "mujoco.csv")
+        + seven_tasks(eps02, "table1_1m_runs.csv"),
+        # Stable-Baselines3's runs beside minippo's side from the same seven-task runs (peers.py --evaluate)
+        "peers": peers([row for row in record("peers.csv") if row["library"] == "sb3"] + record("peers_minippo.csv")),
         "table1_1m": table1(default_1m, randoms, SEVEN_TASKS, [1, 2, 3], STEPS_1M),
         "table1_1m_two_implementations": on_one_scale(
             {"defaults": default_1m, "as the paper describes it": record("table1_1m_paperimpl_runs.csv")}, randoms

@@ -1,15 +1,12 @@
-"""The paper's seven MuJoCo tasks (Gymnasium v5), 1,000,000 steps, 3 seeds, paper defaults: a sweep on minippo
-sweep's engine.
+"""The paper's seven MuJoCo tasks (Gymnasium v5), 1,000,000 steps, 3 seeds, paper defaults, on minippo sweep's engine.
 
     python -m benchmarks.seven_tasks                       # every (task, seed) not yet recorded, Hopper first
     python -m benchmarks.seven_tasks --envs Hopper-v5 --seeds 1 2 3
     python -m benchmarks.seven_tasks --address HOST:PORT   # on a running Ray cluster
     python -m benchmarks.seven_tasks --list                # what is recorded, what is left
 
-Each training is what ``minippo train ENV --steps 1000000 --seed S --out benchmarks/runs/mujoco/ENV-seedS --quiet``
-runs, as a Ray task of one CPU (on this machine, one per core, unless ``--workers`` or ``--address``). When it
-finishes, its folder is written, its progress.csv rounded, and one row appended to benchmarks/results/mujoco.csv
-with that command. Recorded (task, seed) pairs are skipped, so the same command resumes where it stopped.
+Each run is ``minippo train ENV --steps 1000000 --seed S --out benchmarks/runs/mujoco/ENV-seedS --quiet``, as a Ray
+task of one CPU, recorded in benchmarks/results/mujoco.csv with that command; recorded runs are skipped.
 """
 
 from __future__ import annotations
@@ -18,7 +15,6 @@ import argparse
 
 from benchmarks import common
 from benchmarks.scoring import SEVEN_TASKS as TASKS
-from minippo.records import read_rows
 
 SEEDS = [1, 2, 3]
 STEPS = 1_000_000
@@ -52,17 +48,8 @@ def main(argv=None) -> int:
     unknown = [env_id for env_id in args.envs if env_id not in TASKS]
     if unknown:
         common.fail(f"unknown task {', '.join(unknown)}; the seven are {', '.join(TASKS)}")
-    if args.steps < 2048:
-        common.fail(f"--steps must be at least one horizon (2048), not {args.steps}")
+    common.check_steps(args.steps)
     runs = sweep_runs(args.envs, args.seeds, args.steps)
-    if args.list:
-        done = {(row["env"], row["seed"]) for row in read_rows(args.csv)}
-        for row in read_rows(args.csv):
-            print(f"recorded  {row['env']:<26} seed {row['seed']}  return {row['return_mean']:>9}")
-        for run in runs:
-            if run.key() not in done:
-                print(f"to do     {run.labels['env']:<26} seed {run.labels['seed']}")
-        return 0
     return common.run_sweep(runs, args.runs, args.csv, FIELDS, args)
 
 

@@ -1,18 +1,17 @@
 """The speed race on one machine, in one process: raw environment stepping, minippo, and Stable-Baselines3 PPO.
 
-    python -m benchmarks.speed                    # Hopper-v5, 5 interleaved rounds -> benchmarks/results/speed.csv
+    python -m benchmarks.speed                            # Hopper-v5, 5 interleaved rounds -> results/speed.csv
+    python -m benchmarks.speed --env MinAtar/Breakout-v1  # the paper's Atari settings -> results/speed_minatar.csv
 
-Each round measures, one after the other:
-  raw        random actions in ``gym.make(ENV)`` (its defaults), resetting at episode ends: the ceiling, since any
-             trainer has to step the environment too;
-  minippo    training throughput with the paper's settings (T = 2048, K = 10, minibatch 64, Config defaults):
-             ``--updates`` updates after one warm-up update, through the Python API (``minippo.ppo.Trainer``);
-  sb3        Stable-Baselines3 PPO with the same settings, translated from minippo's Config as the side-by-side
-             benchmark translates them (``peers.sb3_model``), one env, one torch thread, device cpu, after one
-             warm-up rollout and update; skipped and recorded as skipped when it is not installed.
-Both trainers get one math thread (OpenBLAS for NumPy, torch's intra-op pool for SB3). The rounds are interleaved
-so that a change in the machine's load hits all three; the table keeps each round and reports the median.
-Run it while no training is running: it wants the cores to itself, and the 1-minute load average goes in the CSV.
+Each round measures, one after the other: raw stepping (random actions in ``gym.make(ENV)``, resetting at episode
+ends: the ceiling, since any trainer steps the environment too); ``--updates`` updates of minippo's ``Trainer`` after a
+warm-up update; and Stable-Baselines3 PPO with the same settings after a warm-up update, one torch thread, device cpu
+(recorded as skipped when it is not installed). On MuJoCo both have the paper's settings, SB3's translated from
+minippo's Config as the side-by-side benchmark translates them (``peers.sb3_model``); on MinAtar the paper's Atari
+settings (``--preset atari``) and the network conv(16, 3×3) → ReLU → dense 128 → ReLU under a policy head and a value
+head (for SB3 a shared features extractor, its environments stepped in one process as minippo's are). The rounds are
+interleaved so that a change in the machine's load hits all three; the table reports the medians. Run it while no
+training is running: the 1-minute load average goes in the CSV.
 """
 
 from __future__ import annotations
@@ -23,33 +22,30 @@ for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_name] = "1"  # before NumPy (and torch) start their thread pools
 
 import argparse  # noqa: E402
-import csv  # noqa: E402
 import platform  # noqa: E402
-import shlex  # noqa: E402
 import statistics  # noqa: E402
-import sys  # noqa: E402
 import time  # noqa: E402
-from pathlib import Path  # noqa: E402
 
 from benchmarks import common  # noqa: E402
 
-FIELDS = [
-    "env",
-    "contender",
-    "steps_per_s",
-    "rounds",
-    "steps_per_round",
-    "vs_raw",
-    "vs_sb3",
-    "version",
-    "load_before",
-    "load_after",
-    "machine",
-    "date",
-    "commit",
-    "command",
-]
+FIELDS = ["env", "contender", "steps_per_s", "rounds", "steps_per_round", "vs_raw", "vs_sb3", "version"]
+FIELDS += ["load_before", "load_after", "machine", "date", "commit", "command"]
 CSV_PATH = common.RESULTS / "speed.csv"
+MINATAR_CSV_PATH = common.RESULTS / "speed_minatar.csv"
+
+
+def minatar(env_id: str) -> bool:
+    return env_id.startswith("MinAtar/")
+
+
+def race_config(env_id: str, seed: int):
+    """The paper's MuJoCo settings (Config's defaults), or its Atari settings on a MinAtar game."""
+    from minippo.ppo import Config
+    from minippo.presets import ATARI
+
+    if minatar(env_id):
+        return Config(env_id=env_id, seed=seed, total_steps=10_000_000, **ATARI).validate()
+    return Config(env_id=env_id, seed=seed, total_steps=1_000_000)
 
 
 def raw_stepping(env_id: str, steps: int, seed: int) -> float:
@@ -72,36 +68,65 @@ def raw_stepping(env_id: str, steps: int, seed: int) -> float:
 
 class MinippoContender:
     def __init__(self, env_id: str, seed: int):
-        from minippo.ppo import Config, Trainer
+        from minippo.ppo import Trainer
 
-        self.trainer = Trainer(Config(env_id=env_id, seed=seed, total_steps=1_000_000))
+        self.trainer = Trainer(race_config(env_id, seed))
         self.trainer.run_update()  # warm-up: first touches of memory, caches, lazy imports
 
     def measure(self, updates: int) -> tuple[float, int]:
-        steps_before = self.trainer.rollout.steps
-        started = time.perf_counter()
+        steps_before, started = self.trainer.rollout.steps, time.perf_counter()
         for _ in range(updates):
             self.trainer.run_update()
-        elapsed = time.perf_counter() - started
         steps = self.trainer.rollout.steps - steps_before
-        return steps / elapsed, steps
+        return steps / (time.perf_counter() - started), steps
+
+
+def sb3_minatar_model(config):
+    """SB3 PPO with minippo's ATARI preset translated, on minippo's MinAtar network written in torch."""
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
+
+    class MinAtarTrunk(BaseFeaturesExtractor):
+        def __init__(self, observation_space):
+            super().__init__(observation_space, features_dim=128)
+            height, width, channels = observation_space.shape
+            self.conv = torch.nn.Conv2d(channels, 16, 3)
+            self.dense = torch.nn.Linear((height - 2) * (width - 2) * 16, 128)
+
+        def forward(self, observations):
+            images = observations.permute(0, 3, 1, 2)  # NHWC, as MinAtar gives them, to torch's NCHW
+            return torch.relu(self.dense(torch.relu(self.conv(images)).flatten(1)))
+
+    torch.set_num_threads(1)
+
+    def annealed(initial):
+        return lambda progress_remaining: initial * progress_remaining  # α falls linearly from 1 to 0
+
+    settings = dict(n_steps=config.horizon, batch_size=config.minibatch_size, n_epochs=config.epochs)
+    settings |= dict(gamma=config.gamma, gae_lambda=config.gae_lambda, ent_coef=config.entropy_coef)
+    settings |= dict(vf_coef=config.value_coef, max_grad_norm=config.max_grad_norm, learning_rate=annealed(config.lr))
+    settings |= dict(clip_range=annealed(config.clip_epsilon), clip_range_vf=annealed(config.clip_epsilon))
+    trunk = dict(features_extractor_class=MinAtarTrunk, net_arch=[], share_features_extractor=True)
+    env = make_vec_env(config.env_id, config.num_envs, config.seed)
+    return PPO("MlpPolicy", env, policy_kwargs=trunk, device="cpu", seed=config.seed, verbose=0, **settings)
 
 
 class StableBaselinesContender:
     def __init__(self, env_id: str, seed: int):
         from benchmarks.peers import sb3_model
-        from minippo.ppo import Config
 
-        self.model, _ = sb3_model(Config(env_id=env_id, seed=seed, total_steps=1_000_000))  # the peers' settings
-        self.model.learn(total_timesteps=2048)  # warm-up: one rollout and one update
+        config = race_config(env_id, seed)
+        self.model = sb3_minatar_model(config) if minatar(env_id) else sb3_model(config)[0]  # the peers' settings
+        self.batch = self.model.n_steps * self.model.n_envs
+        self.model.learn(total_timesteps=self.batch)  # warm-up: one rollout and one update
 
     def measure(self, updates: int) -> tuple[float, int]:
-        steps_before = self.model.num_timesteps
-        started = time.perf_counter()
-        self.model.learn(total_timesteps=updates * 2048, reset_num_timesteps=False)
-        elapsed = time.perf_counter() - started
+        steps_before, started = self.model.num_timesteps, time.perf_counter()
+        self.model.learn(total_timesteps=updates * self.batch, reset_num_timesteps=False)
         steps = self.model.num_timesteps - steps_before
-        return steps / elapsed, steps
+        return steps / (time.perf_counter() - started), steps
 
 
 def sb3_version() -> str | None:
@@ -119,43 +144,43 @@ def summarize(env_id: str, rounds: dict[str, list[float]], steps: dict[str, int]
     rows = []
     for name in ("raw", "minippo", "sb3"):
         median = medians.get(name)
-        rows.append(
-            {
-                "env": env_id,
-                "contender": name,
-                "steps_per_s": round(median, 1) if median is not None else "",
-                "rounds": ";".join(f"{value:.1f}" for value in rounds.get(name, [])),
-                "steps_per_round": steps.get(name, ""),
-                "vs_raw": round(median / medians["raw"], 3) if median is not None and "raw" in medians else "",
-                "vs_sb3": round(median / medians["sb3"], 3) if median is not None and "sb3" in medians else "",
-                "version": versions.get(name, ""),
-            }
-        )
+        row = {"env": env_id, "contender": name, "steps_per_s": round(median, 1) if median is not None else ""}
+        row |= {
+            "rounds": ";".join(f"{value:.1f}" for value in rounds.get(name, [])),
+            "steps_per_round": steps.get(name, ""),
+        }
+        for other in ("raw", "sb3"):
+            row[f"vs_{other}"] = round(median / medians[other], 3) if median is not None and other in medians else ""
+        rows.append({**row, "version": versions.get(name, "")})
     return rows
 
 
-def parser_for(description: str, env_id: str, updates: int, csv_path) -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(description=description)
-    parser.add_argument("--env", default=env_id)
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--env", default="Hopper-v5", help="a MuJoCo task, or a MinAtar game (MinAtar/<Game>-v1)")
     parser.add_argument("--rounds", type=int, default=5)
-    parser.add_argument("--updates", type=int, default=updates, help="timed updates per round for each trainer")
+    parser.add_argument("--updates", type=int, help="timed updates per round for each trainer (3; 5 on MinAtar)")
     parser.add_argument("--raw-steps", type=int, default=20_000, help="random steps per round for raw stepping")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--no-sb3", action="store_true", help="leave Stable-Baselines3 out even if installed")
-    parser.add_argument("--csv", default=str(csv_path))
-    return parser
-
-
-def race(args, command: str, minippo_contender, sb3_contender) -> int:
-    """Interleaved rounds of raw stepping and the two trainers (made by the two contender classes), the medians
-    written to ``args.csv`` with the machine, the load, the commit and ``command``."""
+    parser.add_argument("--csv", help="the record to write (default: results/speed.csv, speed_minatar.csv on MinAtar)")
+    args = parser.parse_args(argv)
+    args.updates = (5 if minatar(args.env) else 3) if args.updates is None else args.updates
+    args.csv = args.csv or str(MINATAR_CSV_PATH if minatar(args.env) else CSV_PATH)
     if args.rounds < 1 or args.updates < 1 or args.raw_steps < 1:
         common.fail("--rounds, --updates and --raw-steps must be positive")
     import gymnasium as gym
     import numpy as np
 
     import minippo
+    from minippo.errors import MinippoError
+    from minippo.minatar import register_games
 
+    if minatar(args.env):
+        try:
+            register_games()
+        except MinippoError as error:
+            common.fail(str(error))
     if args.env not in gym.registry:
         common.fail(f"unknown environment id '{args.env}'")
     load_before = os.getloadavg()[0]
@@ -163,11 +188,11 @@ def race(args, command: str, minippo_contender, sb3_contender) -> int:
         "raw": f"gymnasium {gym.__version__}",
         "minippo": f"minippo {minippo.__version__}, numpy {np.__version__}",
     }
-    contenders = {"minippo": minippo_contender(args.env, args.seed)}
+    contenders = {"minippo": MinippoContender(args.env, args.seed)}
     sb3 = None if args.no_sb3 else sb3_version()
     if sb3:
         versions["sb3"] = sb3
-        contenders["sb3"] = sb3_contender(args.env, args.seed)
+        contenders["sb3"] = StableBaselinesContender(args.env, args.seed)
     else:
         versions["sb3"] = "skipped: " + ("--no-sb3" if args.no_sb3 else "stable-baselines3 is not installed")
     rounds: dict[str, list[float]] = {name: [] for name in ("raw", "minippo", "sb3")}
@@ -186,24 +211,13 @@ def race(args, command: str, minippo_contender, sb3_contender) -> int:
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d %H:%M"),
         "commit": common.git_commit(),
-        "command": command.strip(),
+        "command": common.invocation("speed", argv),
     }
-    path = Path(args.csv)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="") as handle:  # one race per file: all its numbers come from the same run
-        writer = csv.DictWriter(handle, fieldnames=FIELDS, lineterminator="\n")
-        writer.writeheader()
-        writer.writerows({**row, **extra} for row in rows)
+    common.write_rows(args.csv, [{**row, **extra} for row in rows], FIELDS)  # one race per file
     for row in rows:
         print(f"{row['contender']:<8} {row['steps_per_s']!s:>9} steps/s   vs raw {row['vs_raw']!s:>6}   "
               f"vs sb3 {row['vs_sb3']!s:>6}   {row['version']}")  # fmt: skip
     return 0
-
-
-def main(argv=None) -> int:
-    args = parser_for(__doc__.split("\n\n")[0], "Hopper-v5", 3, CSV_PATH).parse_args(argv)
-    command = "python -m benchmarks.speed " + shlex.join(argv if argv is not None else sys.argv[1:])
-    return race(args, command, MinippoContender, StableBaselinesContender)
 
 
 if __name__ == "__main__":

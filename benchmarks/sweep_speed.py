@@ -4,59 +4,39 @@ two workers, wall time side by side.
     python -m benchmarks.sweep_speed                        # Hopper-v5, clip_epsilon 0.1 and 0.2, seeds 1-2
     python -m benchmarks.sweep_speed --steps 204800 --workers 2
 
-One after the other is what a user without the engine would type: each run's ``minippo train`` command (run in this
-process, so no interpreter start-up is counted), every run with one math thread. The sweep is ``minippo sweep`` with
-the same runs and ``--workers 2``, timed from the start of Ray to its stop, so the engine's start-up is in its time.
-Both write the same run folders; the script checks that every run's progress.csv is the same on both sides apart
-from the clock columns, and writes one row to benchmarks/results/sweep_speed.csv: both wall times, their ratio, the
-trainings' own clocks summed, the load average before and after, the commit and the command.
+One after the other is each run's ``minippo train`` command, run in this process (no interpreter start-up counted);
+the sweep is ``minippo sweep`` with the same runs, timed from the start of Ray to its stop. The script checks that
+every run's progress.csv is the same on both sides apart from the clock columns, and appends one row to
+benchmarks/results/sweep_speed.csv: both wall times, their ratio, the trainings' own clocks summed, the load average
+before and after, the commit and the command.
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
 import os
 import shlex
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 from benchmarks import common
-from minippo.errors import MinippoError  # noqa: E402
-from minippo.records import append_row
+from minippo.errors import MinippoError
+from minippo.records import append_row, read_rows
 
 CSV_PATH = common.RESULTS / "sweep_speed.csv"
-FIELDS = [
-    "env",
-    "grid",
-    "runs",
-    "steps",
-    "workers",
-    "cpus",
-    "sequential_s",
-    "sweep_s",
-    "speedup",
-    "sequential_train_s",
-    "sweep_train_s",
-    "same_progress",
-    "load_before",
-    "load_after",
-    "commit",
-    "command",
-]
-TIMING = {"steps_per_s", "wall_s"}
+FIELDS = ["env", "grid", "runs", "steps", "workers", "cpus", "sequential_s", "sweep_s", "speedup", "sequential_train_s"]
+FIELDS += ["sweep_train_s", "same_progress", "load_before", "load_after", "commit", "command"]
 
 
 def progress(folder) -> list[dict]:
-    with open(Path(folder) / "progress.csv", newline="") as handle:
-        return [{k: v for k, v in row.items() if k not in TIMING} for row in csv.DictReader(handle)]
+    """A run's progress.csv without its clock columns."""
+    rows = read_rows(folder / "progress.csv")
+    return [{key: value for key, value in row.items() if key not in ("steps_per_s", "wall_s")} for row in rows]
 
 
-def last_wall(folder) -> float:
-    with open(Path(folder) / "progress.csv", newline="") as handle:
-        return float(list(csv.DictReader(handle))[-1]["wall_s"])
+def train_seconds(folder) -> float:
+    return float(read_rows(folder / "progress.csv")[-1]["wall_s"])
 
 
 def main(argv=None) -> int:
@@ -82,8 +62,7 @@ def main(argv=None) -> int:
         alone, swept = Path(scratch) / "alone", Path(scratch) / "swept"
         started = time.perf_counter()
         for run in runs:
-            argv_run = shlex.split(run.command(alone))[1:]
-            if minippo(argv_run) != 0:
+            if minippo(shlex.split(run.command(alone))[1:]) != 0:
                 common.fail(f"'{run.command(alone)}' failed")
         sequential = time.perf_counter() - started
         started = time.perf_counter()
@@ -92,27 +71,15 @@ def main(argv=None) -> int:
         if failed:
             common.fail(f"{failed} runs of the sweep failed; see {swept / 'sweep.csv'}")
         same = all(progress(alone / run.name) == progress(swept / run.name) for run in runs)
-        train_alone = sum(last_wall(alone / run.name) for run in runs)
-        train_swept = sum(last_wall(swept / run.name) for run in runs)
-    row = {
-        "env": args.env,
-        "grid": args.grid,
-        "runs": len(runs),
-        "steps": runs[0].config.num_updates * runs[0].config.batch_size,
-        "workers": args.workers,
-        "cpus": os.cpu_count(),
-        "sequential_s": round(sequential, 1),
-        "sweep_s": round(swept_s, 1),
-        "speedup": round(sequential / swept_s, 2),
-        "sequential_train_s": round(train_alone, 1),
-        "sweep_train_s": round(train_swept, 1),
-        "same_progress": "yes" if same else "no",
-        "load_before": round(load_before, 2),
-        "load_after": round(os.getloadavg()[0], 2),
-        "commit": commit,
-        "command": "python -m benchmarks.sweep_speed " + common.shell_text(sys.argv[1:] if argv is None else argv),
-    }
-    append_row(args.csv, FIELDS, row)
+        train_alone = sum(train_seconds(alone / run.name) for run in runs)
+        train_swept = sum(train_seconds(swept / run.name) for run in runs)
+    steps = runs[0].config.num_updates * runs[0].config.batch_size
+    row = {"env": args.env, "grid": args.grid, "runs": len(runs), "steps": steps, "workers": args.workers}
+    row |= {"cpus": os.cpu_count(), "sequential_s": round(sequential, 1), "sweep_s": round(swept_s, 1)}
+    row |= {"speedup": round(sequential / swept_s, 2), "sequential_train_s": round(train_alone, 1)}
+    row |= {"sweep_train_s": round(train_swept, 1), "same_progress": "yes" if same else "no"}
+    row |= {"load_before": round(load_before, 2), "load_after": round(os.getloadavg()[0], 2), "commit": commit}
+    append_row(args.csv, FIELDS, {**row, "command": common.invocation("sweep_speed", argv)})
     print(
         f"{len(runs)} runs of {args.env}: one after the other {row['sequential_s']} s, on the sweep engine with "
         f"{args.workers} workers {row['sweep_s']} s ({row['speedup']}x); the same progress: {row['same_progress']}"

@@ -1,21 +1,15 @@
-"""Table 1 of the paper at a reduced scale: which surrogate objective works best.
+"""Table 1 of the paper, scored as the paper scores it: which surrogate objective works best.
 
     python -m benchmarks.table1            # random baselines, then every (setting, task, seed) not yet recorded, then
                                            # the scores in benchmarks/results/table1.csv
     python -m benchmarks.table1 --score    # only recompute table1.csv from the records
 
-The paper ran 11 settings × 7 tasks × 3 seeds × 1M steps (231M steps). Here: 11 settings × 3 tasks (HalfCheetah-v5,
-Hopper-v5, InvertedDoublePendulum-v5) × 3 seeds × 250,000 steps (122 updates of 2048 steps = 249,856 steps), about
-24.7M steps; the learning rate anneals to 0 over the 250,000 steps, as it would over 1M. Everything else is the
-paper's MuJoCo defaults. Scoring as the paper's: per task, the random policy's mean return is 0 and the best final
-return of any run on that task is 1; a setting's score is the mean over its tasks and seeds. Each run's return is
-the mean of its last 100 episodes at the end of training.
-
-Table 1 is a sweep on minippo sweep's engine: each run is what ``minippo train ENV --steps N --seed S --out
-benchmarks/runs/table1/<setting>-ENV-seedS --quiet <the setting's options>`` runs, as a Ray task of one CPU (one per
-core on this machine, or on a cluster with ``--address HOST:PORT``). Runs are recorded in
-benchmarks/results/table1_runs.csv (one row per run, with that command); recorded runs are skipped, so the same
-command resumes.
+By default at a reduced scale: 11 settings × 3 tasks (HalfCheetah-v5, Hopper-v5, InvertedDoublePendulum-v5) × 3 seeds
+× 250,000 steps (the paper's: × 7 tasks × 1M steps); everything else is the paper's MuJoCo defaults. Per task the
+random policy's mean return is 0 and the best final return of any run is 1; a setting's score is the mean over its
+tasks and seeds. Each run is what ``minippo train ENV --steps N --seed S --out
+benchmarks/runs/table1/<setting>-ENV-seedS --quiet <the setting's options>`` runs, as a Ray task of one CPU,
+recorded in benchmarks/results/table1_runs.csv; recorded runs are skipped, so the same command resumes.
 """
 
 from __future__ import annotations
@@ -27,21 +21,21 @@ from benchmarks import common, random_policy, scoring
 from minippo.errors import MinippoError
 from minippo.records import read_rows
 
-# (name, minippo train options, the paper's Table 1 score)
+# (name, objective, Config overrides, the paper's score): the rows of Table 1, as ``minippo train`` options
 SETTINGS = [
-    ("No clipping or penalty", ["--objective", "cpi"]),
-    ("Clipping, ε = 0.1", ["--objective", "clip", "--config", "clip_epsilon=0.1"]),
-    ("Clipping, ε = 0.2", ["--objective", "clip", "--config", "clip_epsilon=0.2"]),
-    ("Clipping, ε = 0.3", ["--objective", "clip", "--config", "clip_epsilon=0.3"]),
-    ("Adaptive KL, d_targ = 0.003", ["--objective", "klpen", "--config", "kl_target=0.003"]),
-    ("Adaptive KL, d_targ = 0.01", ["--objective", "klpen", "--config", "kl_target=0.01"]),
-    ("Adaptive KL, d_targ = 0.03", ["--objective", "klpen", "--config", "kl_target=0.03"]),
-    ("Fixed KL, β = 0.3", ["--objective", "klpen", "--config", "adaptive_kl=false", "kl_beta=0.3"]),
-    ("Fixed KL, β = 1", ["--objective", "klpen", "--config", "adaptive_kl=false", "kl_beta=1"]),
-    ("Fixed KL, β = 3", ["--objective", "klpen", "--config", "adaptive_kl=false", "kl_beta=3"]),
-    ("Fixed KL, β = 10", ["--objective", "klpen", "--config", "adaptive_kl=false", "kl_beta=10"]),
+    ("No clipping or penalty", "cpi", []),
+    ("Clipping, ε = 0.1", "clip", ["clip_epsilon=0.1"]),
+    ("Clipping, ε = 0.2", "clip", ["clip_epsilon=0.2"]),
+    ("Clipping, ε = 0.3", "clip", ["clip_epsilon=0.3"]),
+    ("Adaptive KL, d_targ = 0.003", "klpen", ["kl_target=0.003"]),
+    ("Adaptive KL, d_targ = 0.01", "klpen", ["kl_target=0.01"]),
+    ("Adaptive KL, d_targ = 0.03", "klpen", ["kl_target=0.03"]),
+    ("Fixed KL, β = 0.3", "klpen", ["adaptive_kl=false", "kl_beta=0.3"]),
+    ("Fixed KL, β = 1", "klpen", ["adaptive_kl=false", "kl_beta=1"]),
+    ("Fixed KL, β = 3", "klpen", ["adaptive_kl=false", "kl_beta=3"]),
+    ("Fixed KL, β = 10", "klpen", ["adaptive_kl=false", "kl_beta=10"]),
 ]
-SETTINGS = [(name, options, scoring.TABLE1_PAPER[name]) for name, options in SETTINGS]
+SETTINGS = [(*setting, scoring.TABLE1_PAPER[setting[0]]) for setting in SETTINGS]
 TASKS = ["HalfCheetah-v5", "Hopper-v5", "InvertedDoublePendulum-v5"]
 SEEDS = [1, 2, 3]
 STEPS = 250_000
@@ -60,12 +54,14 @@ def slug(setting: str) -> str:
 
 def with_overrides(setting: tuple, overrides: list[str]) -> tuple:
     """A row of SETTINGS with more ``--config`` overrides (KEY=VALUE) for its training."""
-    name, options, paper = setting
-    if not overrides:
-        return setting
-    if "--config" in options:
-        return name, [*options, *overrides], paper
-    return name, [*options, "--config", *overrides], paper
+    name, objective, own, paper = setting
+    return name, objective, [*own, *overrides], paper
+
+
+def options(setting: tuple) -> list[str]:
+    """A setting as ``minippo train`` options: ['--objective', 'klpen', '--config', 'adaptive_kl=false', ...]."""
+    _, objective, overrides, _ = setting
+    return ["--objective", objective, *(["--config", *overrides] if overrides else [])]
 
 
 def write_table(runs_csv, random_csv, table_csv, tasks, seeds, steps) -> list[dict]:
@@ -78,27 +74,6 @@ def write_table(runs_csv, random_csv, table_csv, tasks, seeds, steps) -> list[di
     return table
 
 
-def setting_config(options: list[str]) -> tuple[str, dict]:
-    """A setting's ``minippo train`` options -> (objective, {Config field: value}), typed as the command line types
-    them: ['--objective', 'klpen', '--config', 'adaptive_kl=false', 'kl_beta=3'] -> ('klpen', {'adaptive_kl': False,
-    'kl_beta': 3.0})."""
-    from minippo.ppo import Config
-
-    objective, overrides, words = "clip", [], list(options)
-    while words:
-        word = words.pop(0)
-        if word == "--objective":
-            objective = words.pop(0)
-        elif word == "--config":
-            while words and not words[0].startswith("--"):
-                overrides.append(words.pop(0))
-        else:
-            raise common.BenchmarkError(f"a setting's options are --objective and --config, not {word}")
-    changed = {text.split("=", 1)[0] for text in overrides}
-    config = Config().with_overrides(overrides)
-    return objective, {key: getattr(config, key) for key in changed}
-
-
 def sweep_runs(settings, envs, seeds, steps) -> list:
     """The sweep: task by task (so that a partial table already covers whole tasks), then seed, then setting."""
     from minippo.ppo import Config
@@ -107,11 +82,12 @@ def sweep_runs(settings, envs, seeds, steps) -> list:
     runs = []
     for env_id in envs:
         for seed in seeds:
-            for name, options, _ in settings:
-                objective, overrides = setting_config(options)
-                config = Config(env_id=env_id, total_steps=steps, seed=seed, objective=objective, **overrides)
+            for setting in settings:
+                name, objective, overrides, _ = setting
+                config = Config(env_id=env_id, total_steps=steps, seed=seed, objective=objective)
                 labels = {"setting": name, "env": env_id, "seed": seed}
-                runs.append(Run(f"{slug(name)}-{env_id}-seed{seed}", config.validate(), labels, list(options)))
+                run_name = f"{slug(name)}-{env_id}-seed{seed}"
+                runs.append(Run(run_name, config.with_overrides(overrides).validate(), labels, options(setting)))
     return runs
 
 
@@ -131,8 +107,7 @@ def main(argv=None) -> int:
     parser.add_argument("--runs", default=str(RUN_ROOT), help="the folder of run folders")
     common.add_sweep_options(parser)
     args = parser.parse_args(argv)
-    if args.steps < 2048:
-        common.fail(f"--steps must be at least one horizon (2048), not {args.steps}")
+    common.check_steps(args.steps)
     numbers = args.settings or range(1, len(SETTINGS) + 1)
     if any(not 1 <= number <= len(SETTINGS) for number in numbers):
         common.fail(f"--settings are row numbers of Table 1, from 1 to {len(SETTINGS)}")

@@ -12,8 +12,8 @@ objective, both action kinds and both network layouts and writes the record the 
 from __future__ import annotations
 
 import argparse
+import itertools
 import sys
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -25,7 +25,6 @@ from minippo.agent import ActorCritic
 from minippo.optimizer import Adam
 from minippo.ppo import OBJECTIVES, Config, update_minibatch
 from minippo.ppo import loss_and_grad as minippo_loss_and_grad
-from minippo.records import append_row
 
 CSV_PATH = common.RESULTS / "torch_bridge.csv"
 FIELDS = ["kind", "layout", "objective", "clip_fraction", "loss", "loss_difference", "max_gradient"]
@@ -125,16 +124,10 @@ def compare(kind, shared, objective, seed=0, adam_steps=4) -> dict:
     clip_fraction = losses.clip_fraction(logp, mb["logp"], config.clip_epsilon)
     loss, _ = minippo_loss_and_grad(agent, mb, config, kl_beta=0.7)
     torch_loss, torch_grad = loss_and_grad(theta, agent, mb, config, kl_beta=0.7)
-    row = {
-        "kind": kind,
-        "layout": "shared" if shared else "separate",
-        "objective": objective,
-        "clip_fraction": clip_fraction,
-        "loss": loss,
-        "loss_difference": abs(loss - torch_loss),
-        "max_gradient": float(np.abs(agent.grads).max()),
-        "max_gradient_difference": float(np.abs(agent.grads - torch_grad).max()),
-    }
+    row = {"kind": kind, "layout": "shared" if shared else "separate", "objective": objective}
+    row |= {"clip_fraction": clip_fraction, "loss": loss, "loss_difference": abs(loss - torch_loss)}
+    row["max_gradient"] = float(np.abs(agent.grads).max())
+    row["max_gradient_difference"] = float(np.abs(agent.grads - torch_grad).max())
     # the same update with each library's Adam: the gradient-norm clip, then one Adam step per minibatch
     optimizer = Adam(agent.params, lr=config.lr, eps=config.adam_eps)
     torch_optimizer = torch.optim.Adam([theta], lr=config.lr, eps=config.adam_eps)
@@ -148,12 +141,7 @@ def compare(kind, shared, objective, seed=0, adam_steps=4) -> dict:
     return row
 
 
-CASES = [
-    (kind, shared, objective)
-    for kind in ("discrete", "continuous")
-    for shared in (False, True)
-    for objective in OBJECTIVES
-]
+CASES = list(itertools.product(("discrete", "continuous"), (False, True), OBJECTIVES))  # kind, shared, objective
 
 
 def main(argv=None) -> int:
@@ -163,10 +151,7 @@ def main(argv=None) -> int:
     extra = {"commit": common.git_commit(("minippo", "benchmarks/torch_bridge.py")), "torch": torch.__version__}
     extra["command"] = "python -m benchmarks.torch_bridge"
     rows = [{**compare(*case), **extra} for case in CASES]
-    path = Path(args.csv)
-    path.unlink(missing_ok=True)
-    for row in rows:
-        append_row(path, FIELDS, row)
+    path = common.write_rows(args.csv, rows, FIELDS)
     worst = max(max(r["loss_difference"], r["max_gradient_difference"], r["max_parameter_difference"]) for r in rows)
     print(f"{len(rows)} cases, largest difference {worst:.1e}; wrote {common.relative(path)}")
     return 0

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from benchmarks import common, report, scoring, seven_tasks, speed, table1
-from minippo.records import read_rows
+from minippo.records import append_row, read_rows
 
 
 def write_csv(path, rows):
@@ -106,13 +106,13 @@ def test_normalized_scores_refuse_missing_random_or_no_progress():
 
 def test_write_table_keeps_the_paper_column_and_order(tmp_path):
     runs = []
-    for name, _, _ in table1.SETTINGS:
+    for name, *_ in table1.SETTINGS:
         value = {"No clipping or penalty": 0.0, "Clipping, ε = 0.2": 200.0}.get(name, 100.0)
         runs.append(recorded_run(name, "A", 1, value))
     write_csv(tmp_path / "runs.csv", runs)
     write_csv(tmp_path / "random.csv", [{"env": "A", "episodes": 100, "seed": 0, "return_mean": 0.0}])
     table = table1.write_table(tmp_path / "runs.csv", tmp_path / "random.csv", tmp_path / "t.csv", ["A"], [1], 5000)
-    assert [row["setting"] for row in table] == [name for name, _, _ in table1.SETTINGS]
+    assert [row["setting"] for row in table] == [name for name, *_ in table1.SETTINGS]
     written = read_rows(tmp_path / "t.csv")
     assert written[0]["score"] == "0.0" and written[0]["paper_score"] == "-0.39"
     assert written[2]["score"] == "1.0" and written[2]["paper_score"] == "0.82"
@@ -136,7 +136,7 @@ def test_write_table_scores_only_the_tasks_whose_runs_are_all_recorded(tmp_path)
 
 
 def test_slug_makes_distinct_folder_names():
-    slugs = [table1.slug(name) for name, _, _ in table1.SETTINGS]
+    slugs = [table1.slug(name) for name, *_ in table1.SETTINGS]
     assert len(set(slugs)) == len(slugs)
     assert table1.slug("Adaptive KL, d_targ = 0.003") == "adaptive-kl-dtarg-0.003"
     assert table1.slug("Clipping, ε = 0.2") == "clipping-eps-0.2"
@@ -205,6 +205,43 @@ def test_runners_skip_what_the_records_hold(tmp_path, stub_engine):
     assert [run.config.seed for run in stub_engine] == [1]
 
 
+def test_ablations_record_each_detail_off_with_the_last_ten_updates(tmp_path, stub_engine, monkeypatch):
+    import importlib
+
+    ablations = importlib.import_module("benchmarks.ablations.__main__")
+    monkeypatch.setattr(ablations, "HERE", tmp_path)
+    monkeypatch.setattr(ablations, "RESULTS", tmp_path / "results.csv")
+    assert ablations.main(["--only", "default", "use_gae", "--seeds", "3", "--steps", "4096", "--quiet"]) == 0
+    rows = read_rows(tmp_path / "results.csv")
+    assert list(rows[0]) == ablations.FIELDS and [row["ablation"] for row in rows] == ["default", "use_gae"]
+    assert (rows[0]["override"], rows[1]["override"]) == ("(none)", "use_gae=false")
+    assert rows[1]["return_last10"] == "15.0" and rows[1]["return_mean"] == "20.0"  # the stub's updates: 10, 20
+    assert rows[1]["command"].endswith(f"--out {tmp_path}/runs/use_gae-seed3 --quiet --config use_gae=false")
+    assert stub_engine[1].config.use_gae is False and stub_engine[0].config.use_gae is True
+    assert ablations.main(["--only", "default", "--seeds", "3", "--steps", "4096", "--quiet"]) == 0
+    assert len(stub_engine) == 2  # recorded: not run again
+
+
+def test_runs_an_interrupted_runner_finished_are_recorded_once(tmp_path):
+    """The engine logged two ok runs and a failed one in sweep.csv before the record was written: the next invocation
+    copies the ok ones that the record lacks, and only once."""
+    runs = seven_tasks.sweep_runs(["Hopper-v5"], [1, 2, 3], 4096)
+    for seed in (1, 2):
+        fake_run(tmp_path / f"Hopper-v5-seed{seed}", 2, [1.23456789, 2.0 + seed])
+    row = {"env": "Hopper-v5", "steps": "4096", "wall_s": "2.04", "steps_per_s": "2000.04", "commit": "c"}
+    log = [{**row, "seed": str(seed), "return_mean": str(2.0 + seed), "status": status, "command": f"train {seed}"}
+           for seed, status in ((1, "ok"), (2, "ok"), (3, "failed"))]  # fmt: skip
+    write_csv(tmp_path / "sweep.csv", log)
+    record = tmp_path / "mujoco.csv"
+    append_row(record, seven_tasks.FIELDS, {**row, "seed": 2, "return_mean": 4.0, "command": "train 2"})
+    assert common.record_sweep(runs, tmp_path, record, seven_tasks.FIELDS) == 1
+    assert common.record_sweep(runs, tmp_path, record, seven_tasks.FIELDS) == 0
+    recorded = [(r["seed"], r["return_mean"], r["command"]) for r in read_rows(record)]
+    assert recorded == [("2", "4.0", "train 2"), ("1", "3.0", "train 1")]
+    assert read_rows(tmp_path / "Hopper-v5-seed1" / "progress.csv")[0]["return_mean"] == "1.23457"  # rounded
+    assert [run.labels["seed"] for run in common.todo(runs, record, seven_tasks.FIELDS)] == [3]
+
+
 def test_table1_sweep_makes_the_commands_of_its_records():
     """The runs the sweep describes are the trainings whose commands the 1M-step Table 1 records hold (the KL rows
     among the stale ones being rerun), which the earlier runner started with one BLAS thread set in the environment,
@@ -225,15 +262,15 @@ def test_table1_sweep_makes_the_commands_of_its_records():
         assert command.split("minippo ", 1)[1] == run.command("benchmarks/runs/table1_1m").split("minippo ", 1)[1]
     fixed = next(run for run in runs if run.labels["setting"] == "Fixed KL, β = 3")
     assert (fixed.config.objective, fixed.config.adaptive_kl, fixed.config.kl_beta) == ("klpen", False, 3.0)
-    with pytest.raises(common.BenchmarkError, match="--objective and --config"):
-        table1.setting_config(["--steps", "5"])
 
 
 def test_table1_overrides_join_each_settings_config():
     cpi, clip = table1.SETTINGS[0], table1.SETTINGS[2]
     extra = ["grad_norm_clipping=false", "anneal_lr=false"]
-    assert table1.with_overrides(cpi, extra)[1] == ["--objective", "cpi", "--config", *extra]
-    assert table1.with_overrides(clip, extra)[1] == ["--objective", "clip", "--config", "clip_epsilon=0.2", *extra]
+    assert table1.options(table1.with_overrides(cpi, extra)) == ["--objective", "cpi", "--config", *extra]
+    assert table1.options(cpi) == ["--objective", "cpi"]
+    joined = table1.options(table1.with_overrides(clip, extra))
+    assert joined == ["--objective", "clip", "--config", "clip_epsilon=0.2", *extra]
     assert table1.with_overrides(clip, []) == clip
 
 
@@ -355,13 +392,13 @@ def test_same_math_table_says_where_the_runs_part():
 
 
 def test_the_report_writes_a_paragraph_and_a_table_for_each_section():
-    tables = {name: [] for _, _, name, _, _ in report.SECTIONS}
+    tables = {name: [] for name in report.COLUMNS}
     tables["same_math"] = [{"env": "E", "seed": "1", "dtype": "float64", "earlier_commit": "a", "commit": "b",
                             "difference_at_update_1": "1e-15", "parted_at_update": 3}]  # fmt: skip
     text = report.summary_text(tables)
-    assert text.count("\n## ") == len(report.SECTIONS)
+    assert text.count("\n## ") == len(report.COLUMNS) and "<!-- table:" not in text
     assert "| E | 1 | float64 | a → b | 1e-15 | 3 |" in text
-    assert text.count("No complete record yet.") == len(report.SECTIONS) - 1
+    assert text.count("No complete record yet.") == len(report.COLUMNS) - 1
 
 
 def test_the_readme_shows_what_the_committed_records_say(tmp_path):

@@ -4,7 +4,6 @@ sweep engine (skipped when Stable-Baselines3 or Ray is not installed)."""
 
 import importlib.util
 import math
-from types import SimpleNamespace
 
 import pytest
 
@@ -252,8 +251,7 @@ def test_a_missing_sb3_is_named_with_its_install_command(monkeypatch, capsys):
 
 
 def test_the_peer_sweep_logs_and_records_its_own_columns(tmp_path):
-    args = SimpleNamespace(workers=None, address=None, retries=0, quiet=True)  # as common.add_sweep_options gives
-    job = peers.PeerSweep(peers.sweep_runs(["Hopper-v5"], [1], 4096), tmp_path / "runs", tmp_path / "peers.csv", args)
+    job = peers.PeerSweep(peers.sweep_runs(["Hopper-v5"], [1], 4096), tmp_path / "runs", tmp_path / "peers.csv")
     assert job.fields[:4] == ["library", "task", "seed", "steps"] and job.record_csv == tmp_path / "peers.csv"
     assert job.csv_path == tmp_path / "runs" / "sweep.csv" and job.commit == peers.code_commit()
 

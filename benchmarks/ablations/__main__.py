@@ -1,0 +1,72 @@
+"""Chapter 10's ablations: every implementation detail of minippo switched off, one at a time, against the defaults,
+as a sweep on minippo sweep's engine.
+
+    python -m benchmarks.ablations              # every ablation, seeds 1 and 2, Hopper-v5, 163,840 steps
+    python -m benchmarks.ablations --dry-run    # print the commands of the runs not yet recorded
+    python -m benchmarks.ablations --only default anneal_lr --seeds 3
+
+Each run is ``minippo train Hopper-v5 --steps 163840 --seed S --out benchmarks/ablations/runs/<ablation>-seedS --quiet
+--config <the detail>=false``, recorded in benchmarks/ablations/results.csv with its command and ``return_last10``,
+the mean of the last 10 updates' returns; recorded runs are skipped.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from benchmarks import common
+from minippo.records import read_rows
+
+HERE = Path(__file__).resolve().parent
+RESULTS = HERE / "results.csv"
+FIELDS = ["ablation", "override", "env", "seed", "steps", "return_mean", "return_last10", "wall_s", "steps_per_s"]
+FIELDS += ["commit", "command"]
+# The detail each run switches off; "default" is Config() as it is (the paper's MuJoCo settings).
+ABLATIONS = ["default", "normalize_advantages", "clip_value_loss", "grad_norm_clipping", "anneal_lr"]
+ABLATIONS += ["orthogonal_init", "normalize_observations", "scale_rewards", "use_gae", "shuffle_minibatches"]
+
+
+def sweep_runs(names, env_id: str, steps: int, seeds) -> list:
+    """Seed by seed, so that a partial sweep still covers every ablation once."""
+    from minippo.ppo import Config
+    from minippo.sweep import Run
+
+    runs = []
+    for seed in seeds:
+        for name in names:
+            override = [] if name == "default" else [f"{name}=false"]
+            config = Config(env_id=env_id, total_steps=steps, seed=seed).with_overrides(override)
+            labels = {"ablation": name, "override": override[0] if override else "(none)", "env": env_id, "seed": seed}
+            runs.append(Run(f"{name}-seed{seed}", config, labels, ["--config", *override] if override else []))
+    return runs
+
+
+def last_ten(folder: Path) -> dict:
+    tail = [float(row["return_mean"]) for row in read_rows(folder / "progress.csv")[-10:]]
+    return {"return_last10": round(sum(tail) / len(tail), 2)}
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="benchmarks.ablations", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--env", default="Hopper-v5")
+    parser.add_argument("--steps", type=int, default=163_840, help="per run (80 updates of T = 2048 by default)")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--only", nargs="+", metavar="ABLATION", help=f"a subset of: {', '.join(ABLATIONS)}")
+    parser.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
+    common.add_sweep_options(parser)
+    args = parser.parse_args(argv)
+    unknown = [name for name in args.only or [] if name not in ABLATIONS]
+    if unknown:
+        common.fail(f"unknown ablation(s) {', '.join(unknown)}; choose from {', '.join(ABLATIONS)}")
+    common.check_steps(args.steps)
+    runs = sweep_runs(args.only or ABLATIONS, args.env, args.steps, args.seeds)
+    if args.dry_run:
+        for run in common.todo(runs, RESULTS, FIELDS):
+            print(run.command(common.relative(HERE / "runs")))
+        return 0
+    return common.run_sweep(runs, HERE / "runs", RESULTS, FIELDS, args, more=last_ten)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
