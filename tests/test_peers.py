@@ -78,7 +78,9 @@ def test_the_curves_figure_draws_each_librarys_seeds(tmp_path):
     drawn = []
     for library, level in (("minippo", 100.0), ("sb3", 50.0)):
         for seed in (1, 2):
-            folder = runs / f"{library}-Hopper-v5-seed{seed}"
+            # SB3's runs in the side-by-side folder, minippo's in the seven tasks' (the runs its side reads)
+            sb3_folder, minippo_folder = runs / f"sb3-Hopper-v5-seed{seed}", tmp_path / "seven" / f"Hopper-v5-seed{seed}"
+            folder = sb3_folder if library == "sb3" else minippo_folder
             folder.mkdir(parents=True)
             lines = ["update,step,return_mean"] + [f"{k},{2048 * k},{level * k + seed}" for k in range(1, 6)]
             (folder / "progress.csv").write_text("\n".join(lines) + "\n")
@@ -94,7 +96,7 @@ def test_the_curves_figure_draws_each_librarys_seeds(tmp_path):
 
     matplotlib.axes.Axes.plot = spy
     try:
-        report.figure_peers(rows, tmp_path / "peers_curves.png", runs)
+        report.figure_peers(rows, tmp_path / "peers_curves.png", runs, tmp_path / "seven")
     finally:
         matplotlib.axes.Axes.plot = original
     assert (tmp_path / "peers_curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
