@@ -79,8 +79,8 @@ def test_the_curves_figure_draws_each_librarys_seeds(tmp_path):
     for library, level in (("minippo", 100.0), ("sb3", 50.0)):
         for seed in (1, 2):
             # SB3's runs in the side-by-side folder, minippo's in the seven tasks' (the runs its side reads)
-            sb3_folder, minippo_folder = runs / f"sb3-Hopper-v5-seed{seed}", tmp_path / "seven" / f"Hopper-v5-seed{seed}"
-            folder = sb3_folder if library == "sb3" else minippo_folder
+            sb3_folder = runs / f"sb3-Hopper-v5-seed{seed}"
+            folder = sb3_folder if library == "sb3" else tmp_path / "seven" / f"Hopper-v5-seed{seed}"
             folder.mkdir(parents=True)
             lines = ["update,step,return_mean"] + [f"{k},{2048 * k},{level * k + seed}" for k in range(1, 6)]
             (folder / "progress.csv").write_text("\n".join(lines) + "\n")
