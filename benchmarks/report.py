@@ -119,7 +119,6 @@ def readme_blocks(tables: dict[str, list[dict]], speed: list[dict]) -> dict[str,
     return {
         "mujoco": scoring.markdown(seven, columns),
         "speed": scoring.markdown(speed, {k: SPEED[k] for k in list(SPEED)[:4]}),
-        "table1": scoring.markdown(tables["table1_1m"], {k: TABLE1[k] for k in ("Setting", "score ± se", "paper")}),
     }
 
 

@@ -405,7 +405,7 @@ def test_the_readme_shows_what_the_committed_records_say(tmp_path):
     text = (common.ROOT / "README.md").read_text()
     tables = scoring.score_all(folder=tmp_path)  # the committed tables are not touched
     blocks = report.readme_blocks(tables, read_rows(common.RESULTS / "speed.csv"))
-    assert set(blocks) == {"mujoco", "speed", "table1"}
+    assert set(blocks) == {"mujoco", "speed"}
     assert report.fill_readme(text, blocks) == text, "run `python -m benchmarks.report`"
     for path in tmp_path.iterdir():  # and the committed tables are what the records give
         assert path.read_text() == (scoring.TABLES / path.name).read_text(), f"{path.name}: run the report"
