@@ -105,14 +105,15 @@ CLASSIC_STATE = ("state", "steps_beyond_terminated", "last_u")  # what the class
 
 def env_state(env: gym.Env) -> dict | None:
     """Everything the next steps of ``env`` depend on, as named arrays: the simulator (MuJoCo's integration state and
-    the quantities it computed from it, which the tasks read before their next step), or a classic-control task's
-    own state; the time limit's step count; the environment's random generator. None for an environment minippo does
-    not know how to save (another family of tasks, or a wrapper it does not know)."""
+    the quantities it computed from it, which the tasks read before their next step), a classic-control task's own
+    state, or what a game that saves itself returns (minippo's MinAtar games); the time limit's step count; the
+    environment's random generator. None for an environment minippo does not know how to save (another family of
+    tasks, or a wrapper it does not know)."""
     state = {}
     while isinstance(env, gym.Wrapper):
         if isinstance(env, gym.wrappers.TimeLimit):
             state["elapsed_steps"] = np.array(env._elapsed_steps)
-        elif not isinstance(env, (gym.wrappers.OrderEnforcing, gym.wrappers.PassiveEnvChecker)):
+        elif not isinstance(env, (gym.wrappers.OrderEnforcing, gym.wrappers.PassiveEnvChecker, FlatImages)):
             return None
         env = env.env
     state["np_random"] = np.array(json.dumps(env.np_random.bit_generator.state))
@@ -126,6 +127,8 @@ def env_state(env: gym.Env) -> dict | None:
         for name in mujoco_arrays(data):
             state[f"data.{name}"] = getattr(data, name).copy()
         return state
+    if hasattr(env, "get_state") and hasattr(env, "set_state"):  # a game that saves itself (minippo's MinAtar)
+        return state | {f"game.{key}": value for key, value in env.get_state().items()}
     if type(env).__module__.startswith("gymnasium.envs.classic_control"):
         scalars = {}
         for name in filter(lambda name: hasattr(env, name), CLASSIC_STATE):
@@ -156,6 +159,9 @@ def load_env_state(env: gym.Env, state: dict) -> None:
             if saved is not None and saved.shape == getattr(env.data, name).shape:
                 getattr(env.data, name)[...] = saved
         mujoco.mj_setState(env.model, env.data, state["physics"], mujoco.mjtState.mjSTATE_INTEGRATION)
+        return
+    if hasattr(env, "set_state"):
+        env.set_state({key[len("game.") :]: value for key, value in state.items() if key.startswith("game.")})
         return
     for name, value in json.loads(str(state["scalars"])).items():
         setattr(env, name, value)

@@ -11,6 +11,7 @@ minippo is asked for a ``MinAtar/`` id.
 from __future__ import annotations
 
 import importlib.util
+import json
 
 import gymnasium as gym
 import numpy as np
@@ -28,6 +29,9 @@ GAMES = {  # Gymnasium name: MinAtar's module name
 # agent that never loses would otherwise never finish an evaluation episode.
 MAX_EPISODE_STEPS = 27_000
 CELL_PIXELS = 16  # each grid cell drawn as a 16 × 16 square by render()
+
+
+FIXED_ATTRIBUTES = ("random", "channels", "action_map", "ramping")  # a game's attributes that play does not change
 
 
 class MinAtarEnv(gym.Env):
@@ -54,6 +58,37 @@ class MinAtarEnv(gym.Env):
     def step(self, action):
         reward, terminal = self.game.act(self.actions[int(action)])
         return self.game.state(), float(reward), bool(terminal), False, {}
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        """The game where it is, as named arrays for a checkpoint: MinAtar's generator (it draws the game's chance
+        events and the sticky actions), the last action (the one a sticky step repeats) and every attribute of the
+        game that changes in play. ``set_state`` puts a game made with the same id back there."""
+        game = self.game
+        name, keys, position, has_gauss, cached_gauss = game.random.get_state()
+        scalars, arrays = {}, {"random_keys": keys}
+        for attribute, value in vars(game.env).items():
+            if attribute in FIXED_ATTRIBUTES:
+                continue
+            if isinstance(value, np.ndarray):
+                arrays[attribute] = value.copy()
+            else:
+                scalars[attribute] = value
+        header = {"random": [name, position, has_gauss, cached_gauss], "last_action": game.last_action, "game": scalars}
+        as_json = json.dumps(header, default=lambda value: value.item())  # NumPy scalars in the game's lists
+        return {"scalars": np.array(as_json), **{f"array.{key}": value for key, value in arrays.items()}}
+
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
+        header = json.loads(str(state["scalars"]))
+        name, position, has_gauss, cached_gauss = header["random"]
+        keys = np.asarray(state["array.random_keys"], dtype=np.uint32)
+        self.game.random.set_state((name, keys, position, has_gauss, cached_gauss))
+        self.game.env.random = self.game.random  # one generator for both, as MinAtar's seed() leaves them
+        self.game.last_action = header["last_action"]
+        for attribute, value in header["game"].items():
+            setattr(self.game.env, attribute, value)
+        for key, value in state.items():
+            if key.startswith("array.") and key != "array.random_keys":
+                setattr(self.game.env, key[len("array.") :], np.array(value))
 
     def render(self):
         """The grid as an RGB image, one colour per channel (a later channel paints over an earlier one)."""

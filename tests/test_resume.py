@@ -4,6 +4,7 @@ and a sweep whose worker is killed retries the run from its last checkpoint and 
 
 import csv
 import errno
+import importlib.util
 import os
 import random
 import shlex
@@ -20,13 +21,18 @@ import pytest
 
 from minippo.cli import main
 from minippo.envs import env_state, load_env_state, make_env
+from minippo.minatar import GAMES
 
 TIMING = {"steps_per_s", "wall_s"}  # the clock columns, the only ones that differ between two identical runs
 RUNS = {  # small runs: 24 updates of one batch each, a checkpoint after every update
     "CartPole-v1": ["horizon=128", "minibatch_size=64", "epochs=2", "checkpoint_every=1"],
     "Hopper-v5": ["horizon=96", "minibatch_size=32", "epochs=2", "checkpoint_every=1"],
 }
+if importlib.util.find_spec("minatar") is not None:  # sticky actions and the game's own generator, saved mid-episode
+    RUNS["MinAtar/Breakout-v1"] = ["horizon=64", "minibatch_size=32", "epochs=2", "checkpoint_every=1"]
+    RUNS["MinAtar/Breakout-v1"] += ["network=minatar_cnn", "shared_network=true"]
 UPDATES = 24
+NEEDS_MINATAR = pytest.mark.skipif(importlib.util.find_spec("minatar") is None, reason="pip install '.[minatar]'")
 
 
 def progress_without_clock(folder) -> list[dict]:
@@ -95,8 +101,12 @@ def uninterrupted(tmp_path_factory):
     return folders
 
 
+MINATAR = [pytest.param(f"MinAtar/{game}-v1", marks=NEEDS_MINATAR) for game in GAMES]
+
+
 @pytest.mark.parametrize(
-    "env_id", ["CartPole-v1", "Acrobot-v1", "Pendulum-v1", "MountainCar-v0", "Hopper-v5", "Ant-v5", "Humanoid-v5"]
+    "env_id",
+    ["CartPole-v1", "Acrobot-v1", "Pendulum-v1", "MountainCar-v0", "Hopper-v5", "Ant-v5", "Humanoid-v5", *MINATAR],
 )
 def test_an_environment_saved_mid_episode_steps_on_as_the_original(env_id):
     """Saved at step 120 and put back into a fresh environment (reset with another seed), it returns the same
@@ -129,7 +139,7 @@ def test_an_environment_saved_mid_episode_steps_on_as_the_original(env_id):
         expected, got = step(original, a), step(copy, a)
         assert got == expected, f"step {120 + t}"
         ends += expected[2] or expected[3]
-    assert ends or env_id in ("Hopper-v5", "Ant-v5", "Humanoid-v5", "MountainCar-v0")  # episodes of ≤ 400 steps
+    assert ends or env_id in ("Hopper-v5", "Ant-v5", "Humanoid-v5", "MountainCar-v0", "MinAtar/Freeway-v1")
 
 
 @pytest.mark.timeout(300)
