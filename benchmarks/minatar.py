@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks import common, scoring
+from benchmarks import common
 from minippo.errors import MinippoError
 from minippo.records import read_rows
 
@@ -87,7 +87,7 @@ def write_table(runs_csv, root, table_csv, envs, seeds) -> list[dict]:
             ppo, a2c = row[f"PPO_{rule}"], row[f"A2C_{rule}"]
             row[f"winner_{rule}"] = "" if np.isnan(ppo) or np.isnan(a2c) else "PPO" if ppo > a2c else "A2C"
         table.append(row)
-    scoring.write(Path(table_csv).stem, table, Path(table_csv).parent)
+    common.write_rows(table_csv, table)
     return table
 
 

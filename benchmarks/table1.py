@@ -15,7 +15,6 @@ recorded in benchmarks/results/table1_runs.csv; recorded runs are skipped, so th
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from benchmarks import common, random_policy, scoring
 from minippo.errors import MinippoError
@@ -70,7 +69,7 @@ def write_table(runs_csv, random_csv, table_csv, tasks, seeds, steps) -> list[di
     if not rows:
         raise common.BenchmarkError(f"no runs recorded in {common.relative(runs_csv)} yet")
     table = scoring.table1(rows, read_rows(random_csv), tasks, seeds, (steps // 2048) * 2048)
-    scoring.write(Path(table_csv).stem, table, Path(table_csv).parent)
+    common.write_rows(table_csv, table)
     return table
 
 
