@@ -25,18 +25,10 @@ import time  # noqa: E402
 
 from benchmarks import common  # noqa: E402
 
-FIELDS = ["env", "contender", "steps_per_s", "rounds", "steps_per_round", "vs_raw", "vs_sb3", "version"]
-FIELDS += ["load_before", "load_after", "machine", "date", "commit", "command"]
-SWEEP_FIELDS = ["env", "grid", "runs", "steps", "workers", "cpus", "sequential_s", "sweep_s", "speedup"]
-SWEEP_FIELDS += [
-    "sequential_train_s",
-    "sweep_train_s",
-    "same_progress",
-    "load_before",
-    "load_after",
-    "commit",
-    "command",
-]
+FIELDS = "env contender steps_per_s rounds steps_per_round vs_raw vs_sb3 version load_before load_after machine date"
+FIELDS = [*FIELDS.split(), "commit", "command"]
+SWEEP_FIELDS = "env grid runs steps workers cpus sequential_s sweep_s speedup sequential_train_s sweep_train_s"
+SWEEP_FIELDS = [*SWEEP_FIELDS.split(), "same_progress", "load_before", "load_after", "commit", "command"]
 
 
 def minatar(env_id: str) -> bool:
@@ -273,14 +265,10 @@ def main(argv=None) -> int:
         shown = ", ".join(f"{name} {values[-1]:.0f}" for name, values in rounds.items() if values)
         print(f"round {number}: {shown} steps/s", flush=True)
     rows = summarize(args.env, rounds, steps, versions)
-    extra = {
-        "load_before": round(load_before, 2),
-        "load_after": round(os.getloadavg()[0], 2),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
-        "date": time.strftime("%Y-%m-%d %H:%M"),
-        "commit": common.git_commit(),
-        "command": common.invocation("speed", argv),
-    }
+    extra = {"load_before": round(load_before, 2), "load_after": round(os.getloadavg()[0], 2)}
+    extra["machine"] = f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
+    extra |= {"date": time.strftime("%Y-%m-%d %H:%M"), "commit": common.git_commit()}
+    extra["command"] = common.invocation("speed", argv)
     common.write_rows(args.csv, [{**row, **extra} for row in rows], FIELDS)  # one race per file
     for row in rows:
         print(f"{row['contender']:<8} {row['steps_per_s']!s:>9} steps/s   vs raw {row['vs_raw']!s:>6}   "
