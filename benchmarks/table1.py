@@ -5,12 +5,8 @@
     python -m benchmarks.table1 --score    # only recompute table1.csv from the records
     python -m benchmarks.table1 --random --envs MinAtar/Breakout-v1    # only the random policy's returns
 
-By default at a reduced scale: 11 settings × 3 tasks (HalfCheetah-v5, Hopper-v5, InvertedDoublePendulum-v5) × 3 seeds
-× 250,000 steps (the paper's: × 7 tasks × 1M steps); everything else is the paper's MuJoCo defaults. Per task the
-random policy's mean return is 0 and the best final return of any run is 1; a setting's score is the mean over its
-tasks and seeds. Each run is what ``minippo train ENV --steps N --seed S --out
-benchmarks/runs/table1/<setting>-ENV-seedS --quiet <the setting's options>`` runs, as a Ray task of one CPU,
-recorded in benchmarks/results/table1_runs.csv; recorded runs are skipped, so the same command resumes.
+By default at a reduced scale: 11 settings × 3 tasks × 3 seeds × 250,000 steps (benchmarks/README.md says exactly
+what was reduced), each run a ``minippo train`` of the setting's options; recorded runs are skipped.
 """
 
 from __future__ import annotations
