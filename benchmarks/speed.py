@@ -233,16 +233,13 @@ def main(argv=None) -> int:
     import numpy as np
 
     import minippo
+    from minippo.envs import check_env_id
     from minippo.errors import MinippoError
-    from minippo.minatar import register_games
 
-    if minatar(args.env):
-        try:
-            register_games()
-        except MinippoError as error:
-            common.fail(str(error))
-    if args.env not in gym.registry:
-        common.fail(f"unknown environment id '{args.env}'")
+    try:
+        check_env_id(args.env)  # registers the MinAtar games when asked for one
+    except MinippoError as error:
+        common.fail(str(error))
     load_before = os.getloadavg()[0]
     versions = {
         "raw": f"gymnasium {gym.__version__}",
