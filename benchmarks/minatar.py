@@ -3,12 +3,10 @@
     python -m benchmarks.minatar --steps N       # every (algorithm, game, seed) not yet recorded, then the table
     python -m benchmarks.minatar --score         # only recompute benchmarks/results/minatar.csv from the records
 
-PPO runs with ``--preset atari`` (the paper's Table 5), A2C with ``--preset a2c``, on the same network. Both of the
-paper's scores: the mean episode return over all of training and over the last 100 episodes (from each run's
-``episodes.csv``); a game is won by the higher mean over seeds. For --steps, from the measured speed (``python -m
-benchmarks.speed --env MinAtar/Breakout-v1``): steps = hours × 3600 × workers × steps/s / 30. Each run is ``minippo
-train ENV --steps N --seed S --out benchmarks/runs/minatar/<alg>-ENV-seedS --quiet --preset <alg>``, recorded in
-benchmarks/results/minatar_runs.csv; recorded runs are skipped.
+PPO runs with ``--preset atari`` (the paper's Table 5), A2C with ``--preset a2c``, on the same network, each run a
+``minippo train``; recorded runs are skipped. Both of the paper's scores, from each run's ``episodes.csv``: the mean
+episode return over all of training and over the last 100 episodes; a game is won by the higher mean over seeds.
+--steps from the speed measured by ``benchmarks.speed --env MinAtar/Breakout-v1``: hours × 3600 × workers × steps/s/30.
 """
 
 from __future__ import annotations
@@ -18,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks import common, scoring
+from benchmarks import common
 from minippo.errors import MinippoError
 from minippo.records import read_rows
 
@@ -87,7 +85,7 @@ def write_table(runs_csv, root, table_csv, envs, seeds) -> list[dict]:
             ppo, a2c = row[f"PPO_{rule}"], row[f"A2C_{rule}"]
             row[f"winner_{rule}"] = "" if np.isnan(ppo) or np.isnan(a2c) else "PPO" if ppo > a2c else "A2C"
         table.append(row)
-    scoring.write(Path(table_csv).stem, table, Path(table_csv).parent)
+    common.write_rows(table_csv, table)
     return table
 
 

@@ -1,14 +1,10 @@
-"""Learning quality side by side with Stable-Baselines3: minippo's PPO and SB3's PPO on the same tasks, with the same
-settings (the paper's MuJoCo settings), the same seeds, on the same machine, as a sweep on minippo sweep's engine.
+"""Learning quality side by side with Stable-Baselines3: minippo's PPO and SB3's PPO on the same tasks, settings
+(``sb3_settings`` translates minippo's ``Config``; benchmarks/README.md tabulates each match), seeds and machine, as a
+sweep on minippo sweep's engine; each run scored on its last 100 training episodes and on 10 deterministic episodes.
 
     python -m benchmarks.peers                       # 3 tasks × seeds 1–5 × 2 libraries × 1M steps: 30 runs
     python -m benchmarks.peers --tasks Hopper-v5 --seeds 1 2 --libraries sb3
     python -m benchmarks.peers --list                # what is recorded, what is left
-
-A minippo run is ``minippo train TASK --steps N --seed S``; an SB3 run is ``stable_baselines3.PPO`` with every
-setting translated from the same ``Config`` by ``sb3_settings`` (benchmarks/README.md tabulates how each was matched).
-Both are scored on the last 100 training episodes and on 10 deterministic episodes of the final policy, one row per
-run in benchmarks/results/peers.csv; recorded runs are skipped.
 """
 
 from __future__ import annotations
@@ -134,10 +130,9 @@ def sb3_model(config: Config):
     settings = sb3_settings(config)
     kwargs = dict(settings["ppo"])
     rate = kwargs["learning_rate"]
-    if rate["anneal"]:
-        kwargs["learning_rate"] = lambda progress_remaining: rate["initial"] * (progress_remaining + rate["plus"])
-    else:
-        kwargs["learning_rate"] = rate["initial"]
+    kwargs["learning_rate"] = (
+        (lambda left: rate["initial"] * (left + rate["plus"])) if rate["anneal"] else rate["initial"]
+    )
     kwargs["policy_kwargs"] = {**kwargs["policy_kwargs"], "activation_fn": torch.nn.Tanh}
     env = VecNormalize(make_vec_env(config.env_id, settings["n_envs"], config.seed), **settings["vec_normalize"])
     return PPO("MlpPolicy", env, verbose=0, **kwargs), env
@@ -295,16 +290,6 @@ def code_commit() -> str:
     return common.git_commit(("minippo", "benchmarks/peers.py"))
 
 
-def ship_by_value() -> None:
-    """Ray sends the task to its workers pickled; on a cluster this package is only on this machine, so the module
-    goes by value."""
-    try:
-        from ray import cloudpickle
-    except ImportError:  # the engine says that Ray is missing
-        return
-    cloudpickle.register_pickle_by_value(sys.modules[__name__])
-
-
 def check_tasks(tasks) -> None:
     import gymnasium as gym
 
@@ -367,7 +352,12 @@ def main(argv=None) -> int:
     if "sb3" in args.libraries and importlib.util.find_spec("stable_baselines3") is None:
         install = 'pip install torch==2.13.0 (the CPU wheel) and then pip install -e ".[peers]"'
         common.fail(f"Stable-Baselines3 is not installed: {install}")
-    ship_by_value()
+    try:  # Ray pickles the task; on a cluster this module is only on this machine, so it goes by value
+        from ray import cloudpickle
+
+        cloudpickle.register_pickle_by_value(sys.modules[__name__])
+    except ImportError:  # the engine says that Ray is missing
+        pass
     engine = functools.partial(PeerSweep, record_csv=args.csv)
     return common.run_sweep(runs, args.runs, args.csv, FIELDS, args, engine=engine)
 

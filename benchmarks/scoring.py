@@ -28,13 +28,6 @@ RANDOM_EPISODES, RANDOM_SEED = 100, 0
 STEPS_1M = 999_424  # 488 updates of 2048 steps
 
 
-# the statistics
-
-
-def mean_sd(values: list[float]) -> tuple[float, float]:
-    return statistics.fmean(values), statistics.stdev(values) if len(values) > 1 else 0.0
-
-
 def welch_interval(first: list[float], second: list[float], level: float = 0.95) -> dict:
     """Welch's t interval for mean(first) − mean(second), variances not assumed equal, at the Welch–Satterthwaite
     degrees of freedom; ``standing`` is ahead / behind when the interval excludes 0, else level."""
@@ -53,9 +46,6 @@ def welch_interval(first: list[float], second: list[float], level: float = 0.95)
         low, high = diff - half, diff + half
     standing = "ahead" if low > 0 else "behind" if high < 0 else "level"
     return {"diff": diff, "se": se, "low": low, "high": high, "standing": standing}
-
-
-# Table 1's scoring
 
 
 def random_returns(rows: list[dict]) -> dict[str, float]:
@@ -155,9 +145,6 @@ def on_one_scale(records: dict[str, list[dict]], randoms: list[dict]) -> list[di
     return table
 
 
-# the seven tasks, the side-by-side comparison, the rechecks
-
-
 def seven_tasks(runs: list[dict], record: str) -> list[dict]:
     """Per task (the paper's seven, in order): the seeds' final returns, mean ± sample sd, the paper's Figure 3 range
     and CleanRL's mean ± sd, and the mean minutes a run took. ``runs``: rows with env, seed, return_mean, wall_s."""
@@ -167,7 +154,7 @@ def seven_tasks(runs: list[dict], record: str) -> list[dict]:
         if not rows:
             continue
         returns = [float(r["return_mean"]) for r in rows]
-        mean, sd = mean_sd(returns)
+        mean, sd = statistics.fmean(returns), statistics.stdev(returns) if len(returns) > 1 else 0.0
         low, high = PAPER_FIGURE3[env_id]
         row = {"record": record, "task": env_id, "seeds": len(rows), "returns": " ".join(f"{v:.1f}" for v in returns)}
         row |= {"mean": round(mean, 1), "sd": round(sd, 1), "paper_low": low, "paper_high": high}
@@ -242,14 +229,6 @@ def same_math(rows: list[dict]) -> list[dict]:
     return table
 
 
-# writing
-
-
-def write(name: str, rows: list[dict], folder=TABLES) -> Path:
-    """Write ``rows`` as ``folder/name.csv`` (whole, or not at all)."""
-    return write_rows(Path(folder) / f"{name}.csv", rows)
-
-
 def markdown(rows: list[dict], columns: dict[str, str]) -> str:
     """A Markdown table of ``rows`` with ``columns`` {header: format string over a row's fields}."""
     lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
@@ -292,7 +271,7 @@ def score_all(results=RESULTS, folder=TABLES) -> dict[str, list[dict]]:
     }
     for name, rows in tables.items():
         if rows:
-            write(name, rows, folder)
+            write_rows(Path(folder) / f"{name}.csv", rows)
     return tables
 
 

@@ -5,8 +5,7 @@
     python -m benchmarks.seven_tasks --address HOST:PORT   # on a running Ray cluster
     python -m benchmarks.seven_tasks --list                # what is recorded, what is left
 
-Each run is ``minippo train ENV --steps 1000000 --seed S --out benchmarks/runs/mujoco/ENV-seedS --quiet``, as a Ray
-task of one CPU, recorded in benchmarks/results/mujoco.csv with that command; recorded runs are skipped.
+Each run is ``minippo train ENV --steps 1000000 --seed S``, recorded in results/mujoco.csv; recorded runs are skipped.
 """
 
 from __future__ import annotations

@@ -1,17 +1,14 @@
-"""The speed race on one machine, in one process: raw environment stepping, minippo, and Stable-Baselines3 PPO.
+"""The speed race on one machine, in one process: raw environment stepping, minippo, and Stable-Baselines3 PPO; or,
+with --sweep, what ``minippo sweep`` saves: a small grid trained one run after the other, then on the sweep engine.
 
     python -m benchmarks.speed                            # Hopper-v5, 5 interleaved rounds -> results/speed.csv
     python -m benchmarks.speed --env MinAtar/Breakout-v1  # the paper's Atari settings -> results/speed_minatar.csv
+    python -m benchmarks.speed --sweep --steps 204800     # 4 Hopper runs, alone and on 2 workers -> sweep_speed.csv
 
-Each round measures, one after the other: raw stepping (random actions in ``gym.make(ENV)``, resetting at episode
-ends: the ceiling, since any trainer steps the environment too); ``--updates`` updates of minippo's ``Trainer`` after a
-warm-up update; and Stable-Baselines3 PPO with the same settings after a warm-up update, one torch thread, device cpu
-(recorded as skipped when it is not installed). On MuJoCo both have the paper's settings, SB3's translated from
-minippo's Config as the side-by-side benchmark translates them (``peers.sb3_model``); on MinAtar the paper's Atari
-settings (``--preset atari``) and the network conv(16, 3×3) → ReLU → dense 128 → ReLU under a policy head and a value
-head (for SB3 a shared features extractor, its environments stepped in one process as minippo's are). The rounds are
-interleaved so that a change in the machine's load hits all three; the table reports the medians. Run it while no
-training is running: the 1-minute load average goes in the CSV.
+The race interleaves its rounds (raw random stepping, ``--updates`` updates of minippo's ``Trainer``, SB3 PPO with the
+settings ``peers.sb3_model`` translates, one torch thread) so that a change in the machine's load hits all three, and
+reports the medians. The sweep mode checks that every run's progress.csv is the same on both sides apart from the
+clock columns. Run either while no training is running: the 1-minute load average goes in the CSV.
 """
 
 from __future__ import annotations
@@ -28,10 +25,10 @@ import time  # noqa: E402
 
 from benchmarks import common  # noqa: E402
 
-FIELDS = ["env", "contender", "steps_per_s", "rounds", "steps_per_round", "vs_raw", "vs_sb3", "version"]
-FIELDS += ["load_before", "load_after", "machine", "date", "commit", "command"]
-CSV_PATH = common.RESULTS / "speed.csv"
-MINATAR_CSV_PATH = common.RESULTS / "speed_minatar.csv"
+FIELDS = "env contender steps_per_s rounds steps_per_round vs_raw vs_sb3 version load_before load_after machine date"
+FIELDS = [*FIELDS.split(), "commit", "command"]
+SWEEP_FIELDS = "env grid runs steps workers cpus sequential_s sweep_s speedup sequential_train_s sweep_train_s"
+SWEEP_FIELDS = [*SWEEP_FIELDS.split(), "same_progress", "load_before", "load_after", "commit", "command"]
 
 
 def minatar(env_id: str) -> bool:
@@ -155,6 +152,61 @@ def summarize(env_id: str, rounds: dict[str, list[float]], steps: dict[str, int]
     return rows
 
 
+def sweep_race(args, argv) -> int:
+    """Each run's ``minippo train`` command in this process, one after the other, then ``minippo sweep`` with the same
+    runs (timed from the start of Ray to its stop); one row appended to the record."""
+    import shlex
+    import tempfile
+    from pathlib import Path
+
+    from minippo import sweep
+    from minippo.cli import main as minippo
+    from minippo.errors import MinippoError
+    from minippo.records import append_row, read_rows
+
+    try:
+        runs = sweep.plan([args.env], sweep.parse_seeds(args.seeds), args.steps, sweep.parse_grid([args.grid]))
+    except MinippoError as error:
+        common.fail(str(error))
+    if args.workers < 1 or args.steps < 2048:
+        common.fail("--workers must be at least 1 and --steps at least one horizon (2048)")
+
+    def progress(run_dir) -> list[dict]:  # without the clock columns
+        rows = read_rows(run_dir / "progress.csv")
+        return [{k: v for k, v in row.items() if k not in ("steps_per_s", "wall_s")} for row in rows]
+
+    load_before, commit, seconds = os.getloadavg()[0], common.git_commit(), {}  # the code as it starts
+    with tempfile.TemporaryDirectory(prefix="sweep-speed-") as scratch:
+        alone, swept = Path(scratch) / "alone", Path(scratch) / "swept"
+        started = time.perf_counter()
+        for run in runs:
+            if minippo(shlex.split(run.command(alone))[1:]) != 0:
+                common.fail(f"'{run.command(alone)}' failed")
+        seconds["sequential"], started = time.perf_counter() - started, time.perf_counter()
+        failed = sweep.Sweep(runs, swept, workers=args.workers, quiet=True).run()
+        seconds["sweep"] = time.perf_counter() - started
+        if failed:
+            common.fail(f"{failed} runs of the sweep failed; see {swept / 'sweep.csv'}")
+        same = all(progress(alone / run.name) == progress(swept / run.name) for run in runs)
+        train = {
+            side: sum(float(read_rows(f / r.name / "progress.csv")[-1]["wall_s"]) for r in runs)
+            for side, f in (("sequential", alone), ("sweep", swept))
+        }
+    steps = runs[0].config.num_updates * runs[0].config.batch_size
+    row = {"env": args.env, "grid": args.grid, "runs": len(runs), "steps": steps, "workers": args.workers}
+    row |= {"cpus": os.cpu_count(), **{f"{side}_s": round(value, 1) for side, value in seconds.items()}}
+    row |= {"speedup": round(seconds["sequential"] / seconds["sweep"], 2)}
+    row |= {"sequential_train_s": round(train["sequential"], 1), "sweep_train_s": round(train["sweep"], 1)}
+    row |= {"same_progress": "yes" if same else "no", "load_before": round(load_before, 2)}
+    row |= {"load_after": round(os.getloadavg()[0], 2), "commit": commit, "command": common.invocation("speed", argv)}
+    append_row(args.csv, SWEEP_FIELDS, row)
+    print(
+        f"{len(runs)} runs of {args.env}: one after the other {row['sequential_s']} s, on the sweep engine with "
+        f"{args.workers} workers {row['sweep_s']} s ({row['speedup']}x); the same progress: {row['same_progress']}"
+    )
+    return 0 if same else 1
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--env", default="Hopper-v5", help="a MuJoCo task, or a MinAtar game (MinAtar/<Game>-v1)")
@@ -163,26 +215,31 @@ def main(argv=None) -> int:
     parser.add_argument("--raw-steps", type=int, default=20_000, help="random steps per round for raw stepping")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--no-sb3", action="store_true", help="leave Stable-Baselines3 out even if installed")
-    parser.add_argument("--csv", help="the record to write (default: results/speed.csv, speed_minatar.csv on MinAtar)")
+    parser.add_argument("--csv", help="the record (speed.csv, speed_minatar.csv on MinAtar, sweep_speed.csv --sweep)")
+    parser.add_argument("--sweep", action="store_true", help="time a grid alone and on the sweep engine instead")
+    parser.add_argument("--grid", default="clip_epsilon=0.1,0.2", help="--sweep: KEY=V1,V2 as minippo sweep takes it")
+    parser.add_argument("--seeds", default="1-2", help="--sweep: the seeds")
+    parser.add_argument("--steps", type=int, default=102400, help="--sweep: steps per run")
+    parser.add_argument("--workers", type=int, default=2, help="--sweep: the engine's workers")
     args = parser.parse_args(argv)
+    record = "sweep_speed" if args.sweep else "speed_minatar" if minatar(args.env) else "speed"
+    args.csv = args.csv or str(common.RESULTS / f"{record}.csv")
+    if args.sweep:
+        return sweep_race(args, argv)
     args.updates = (5 if minatar(args.env) else 3) if args.updates is None else args.updates
-    args.csv = args.csv or str(MINATAR_CSV_PATH if minatar(args.env) else CSV_PATH)
     if args.rounds < 1 or args.updates < 1 or args.raw_steps < 1:
         common.fail("--rounds, --updates and --raw-steps must be positive")
     import gymnasium as gym
     import numpy as np
 
     import minippo
+    from minippo.envs import check_env_id
     from minippo.errors import MinippoError
-    from minippo.minatar import register_games
 
-    if minatar(args.env):
-        try:
-            register_games()
-        except MinippoError as error:
-            common.fail(str(error))
-    if args.env not in gym.registry:
-        common.fail(f"unknown environment id '{args.env}'")
+    try:
+        check_env_id(args.env)  # registers the MinAtar games when asked for one
+    except MinippoError as error:
+        common.fail(str(error))
     load_before = os.getloadavg()[0]
     versions = {
         "raw": f"gymnasium {gym.__version__}",
@@ -205,14 +262,10 @@ def main(argv=None) -> int:
         shown = ", ".join(f"{name} {values[-1]:.0f}" for name, values in rounds.items() if values)
         print(f"round {number}: {shown} steps/s", flush=True)
     rows = summarize(args.env, rounds, steps, versions)
-    extra = {
-        "load_before": round(load_before, 2),
-        "load_after": round(os.getloadavg()[0], 2),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
-        "date": time.strftime("%Y-%m-%d %H:%M"),
-        "commit": common.git_commit(),
-        "command": common.invocation("speed", argv),
-    }
+    extra = {"load_before": round(load_before, 2), "load_after": round(os.getloadavg()[0], 2)}
+    extra["machine"] = f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
+    extra |= {"date": time.strftime("%Y-%m-%d %H:%M"), "commit": common.git_commit()}
+    extra["command"] = common.invocation("speed", argv)
     common.write_rows(args.csv, [{**row, **extra} for row in rows], FIELDS)  # one race per file
     for row in rows:
         print(f"{row['contender']:<8} {row['steps_per_s']!s:>9} steps/s   vs raw {row['vs_raw']!s:>6}   "

@@ -3,23 +3,19 @@
     python -m benchmarks.table1            # random baselines, then every (setting, task, seed) not yet recorded, then
                                            # the scores in benchmarks/results/table1.csv
     python -m benchmarks.table1 --score    # only recompute table1.csv from the records
+    python -m benchmarks.table1 --random --envs MinAtar/Breakout-v1    # only the random policy's returns
 
-By default at a reduced scale: 11 settings × 3 tasks (HalfCheetah-v5, Hopper-v5, InvertedDoublePendulum-v5) × 3 seeds
-× 250,000 steps (the paper's: × 7 tasks × 1M steps); everything else is the paper's MuJoCo defaults. Per task the
-random policy's mean return is 0 and the best final return of any run is 1; a setting's score is the mean over its
-tasks and seeds. Each run is what ``minippo train ENV --steps N --seed S --out
-benchmarks/runs/table1/<setting>-ENV-seedS --quiet <the setting's options>`` runs, as a Ray task of one CPU,
-recorded in benchmarks/results/table1_runs.csv; recorded runs are skipped, so the same command resumes.
+By default at a reduced scale: 11 settings × 3 tasks × 3 seeds × 250,000 steps (benchmarks/README.md says exactly
+what was reduced), each run a ``minippo train`` of the setting's options; recorded runs are skipped.
 """
 
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from benchmarks import common, random_policy, scoring
+from benchmarks import common, scoring
 from minippo.errors import MinippoError
-from minippo.records import read_rows
+from minippo.records import append_row, read_rows
 
 # (name, objective, Config overrides, the paper's score): the rows of Table 1, as ``minippo train`` options
 SETTINGS = [
@@ -42,6 +38,7 @@ STEPS = 250_000
 RUN_FIELDS = ["setting", "env", "seed", "steps", "return_mean", "wall_s", "steps_per_s", "commit", "command"]
 RUNS_CSV = common.RESULTS / "table1_runs.csv"
 TABLE_CSV = common.RESULTS / "table1.csv"
+RANDOM_FIELDS = ["env", "episodes", "seed", "return_mean", "return_std", "length_mean", "commit", "command"]
 RUN_ROOT = common.RUNS / "table1"
 
 
@@ -70,8 +67,40 @@ def write_table(runs_csv, random_csv, table_csv, tasks, seeds, steps) -> list[di
     if not rows:
         raise common.BenchmarkError(f"no runs recorded in {common.relative(runs_csv)} yet")
     table = scoring.table1(rows, read_rows(random_csv), tasks, seeds, (steps // 2048) * 2048)
-    scoring.write(Path(table_csv).stem, table, Path(table_csv).parent)
+    common.write_rows(table_csv, table)
     return table
+
+
+def random_policy(envs, random_csv) -> None:
+    """The random policy's mean return (the 0 of each task's scale) on the ``envs`` that ``random_csv`` lacks: uniform
+    random actions from the seeded action space, ``gym.make`` defaults, episode k reset with seed + k."""
+    import gymnasium as gym
+    import numpy as np
+
+    from minippo.envs import check_env_id
+
+    episodes, seed = scoring.RANDOM_EPISODES, scoring.RANDOM_SEED
+    recorded = scoring.random_returns(read_rows(random_csv))
+    for env_id in envs:
+        check_env_id(env_id)  # registers the MinAtar games when asked for one
+    for env_id in [env_id for env_id in envs if env_id not in recorded]:
+        env = gym.make(env_id)
+        env.action_space.seed(seed)
+        returns, lengths = [], []
+        for episode in range(episodes):
+            env.reset(seed=seed + episode)
+            total, length, done = 0.0, 0, False
+            while not done:
+                _, reward, terminated, truncated, _ = env.step(env.action_space.sample())
+                total, length, done = total + float(reward), length + 1, terminated or truncated
+            returns.append(total)
+            lengths.append(length)
+        env.close()
+        row = {"env": env_id, "episodes": episodes, "seed": seed, "return_mean": round(float(np.mean(returns)), 3)}
+        row |= {"return_std": round(float(np.std(returns)), 3), "length_mean": round(float(np.mean(lengths)), 1)}
+        row |= {"commit": common.git_commit(), "command": common.invocation("table1", ["--random", "--envs", env_id])}
+        append_row(random_csv, RANDOM_FIELDS, row)
+        print(f"{env_id}: random policy {row['return_mean']} ± {row['return_std']} over {episodes} episodes")
 
 
 def sweep_runs(settings, envs, seeds, steps) -> list:
@@ -102,7 +131,8 @@ def main(argv=None) -> int:
     )
     parser.add_argument("--score", action="store_true", help="only rewrite table1.csv from the recorded runs")
     parser.add_argument("--runs-csv", default=str(RUNS_CSV))
-    parser.add_argument("--random-csv", default=str(random_policy.CSV_PATH))
+    parser.add_argument("--random", action="store_true", help="only record the random policy's returns on --envs")
+    parser.add_argument("--random-csv", default=str(common.RESULTS / "random.csv"))
     parser.add_argument("--table-csv", default=str(TABLE_CSV))
     parser.add_argument("--runs", default=str(RUN_ROOT), help="the folder of run folders")
     common.add_sweep_options(parser)
@@ -114,8 +144,11 @@ def main(argv=None) -> int:
     settings = [with_overrides(SETTINGS[number - 1], args.config) for number in numbers]
     code = 0  # 1 when a training failed (it is logged in the runs folder's sweep.csv)
     try:
+        if args.random or not args.score:
+            random_policy(args.envs, args.random_csv)  # the 0 of each task's scale, once
+        if args.random:
+            return 0
         if not args.score:
-            random_policy.main([*args.envs, "--csv", args.random_csv])  # the 0 of each task's scale, once
             runs = sweep_runs(settings, args.envs, args.seeds, args.steps)
             code = common.run_sweep(runs, args.runs, args.runs_csv, RUN_FIELDS, args)
             if code == 130:  # interrupted: the table waits for the next run of the command

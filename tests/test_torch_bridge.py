@@ -1,4 +1,4 @@
-"""minippo's hand-derived update against the same update written with PyTorch autograd (benchmarks/torch_bridge.py):
+"""minippo's hand-derived update against the same update written with PyTorch autograd (book/_torch_bridge.py):
 on random float64 minibatches, for every objective, both action kinds and both network layouts, the loss, the
 gradient and the parameters after four Adam steps agree to rounding. Skipped where PyTorch is not installed."""
 
@@ -8,7 +8,7 @@ import pytest
 
 torch = pytest.importorskip("torch", reason="PyTorch is not installed; the bridge to autograd needs it")
 
-from benchmarks import torch_bridge  # noqa: E402
+from book import _torch_bridge as torch_bridge  # noqa: E402
 
 TOLERANCE = 1e-10  # rounding of float64 sums over a minibatch is about 1e-16; a wrong term shows as 1e-3 or more
 

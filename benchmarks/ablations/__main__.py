@@ -5,9 +5,8 @@ as a sweep on minippo sweep's engine.
     python -m benchmarks.ablations --dry-run    # print the commands of the runs not yet recorded
     python -m benchmarks.ablations --only default anneal_lr --seeds 3
 
-Each run is ``minippo train Hopper-v5 --steps 163840 --seed S --out benchmarks/ablations/runs/<ablation>-seedS --quiet
---config <the detail>=false``, recorded in benchmarks/ablations/results.csv with its command and ``return_last10``,
-the mean of the last 10 updates' returns; recorded runs are skipped.
+Each run is ``minippo train ... --config <the detail>=false``, recorded in results.csv with ``return_last10``, the
+mean of the last 10 updates' returns; recorded runs are skipped.
 """
 
 from __future__ import annotations

@@ -4,29 +4,33 @@
 ``compare`` builds a random float64 minibatch (a policy π_θold, actions sampled from it, a policy π_θ moved away from
 it so that ratios leave the clip band) and returns how far the two losses, the two gradients and the parameters after
 a few Adam steps (minippo's ``Adam`` against ``torch.optim.Adam``) lie apart. Run as a script, it checks every
-objective, both action kinds and both network layouts and writes the record the book's appendix shows:
+objective, both action kinds and both network layouts and writes the record the book's appendix (pytorch-bridge.md)
+shows, from the repository's root:
 
-    python -m benchmarks.torch_bridge
+    python -m book._torch_bridge
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import itertools
 import sys
+from pathlib import Path
 
 import numpy as np
 import torch
 from torch.distributions import Categorical, Normal, kl_divergence
 
-from benchmarks import common
 from minippo import losses
 from minippo.agent import ActorCritic
 from minippo.optimizer import Adam
 from minippo.ppo import OBJECTIVES, Config, update_minibatch
 from minippo.ppo import loss_and_grad as minippo_loss_and_grad
+from minippo.records import commit_of_code
 
-CSV_PATH = common.RESULTS / "torch_bridge.csv"
+ROOT = Path(__file__).resolve().parent.parent
+CSV_PATH = ROOT / "benchmarks" / "results" / "torch_bridge.csv"
 FIELDS = ["kind", "layout", "objective", "clip_fraction", "loss", "loss_difference", "max_gradient"]
 FIELDS += ["max_gradient_difference", "adam_steps", "max_parameter_difference", "commit", "torch", "command"]
 
@@ -148,12 +152,15 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--csv", default=str(CSV_PATH), help="the record to write (replaced)")
     args = parser.parse_args(argv)
-    extra = {"commit": common.git_commit(("minippo", "benchmarks/torch_bridge.py")), "torch": torch.__version__}
-    extra["command"] = "python -m benchmarks.torch_bridge"
+    extra = {"commit": commit_of_code(("minippo", "book/_torch_bridge.py"), ROOT), "torch": torch.__version__}
+    extra["command"] = "python -m book._torch_bridge"
     rows = [{**compare(*case), **extra} for case in CASES]
-    path = common.write_rows(args.csv, rows, FIELDS)
+    with open(args.csv, "w", newline="") as handle:
+        writer = csv.DictWriter(handle, FIELDS, lineterminator="\n")
+        writer.writeheader()
+        writer.writerows(rows)
     worst = max(max(r["loss_difference"], r["max_gradient_difference"], r["max_parameter_difference"]) for r in rows)
-    print(f"{len(rows)} cases, largest difference {worst:.1e}; wrote {common.relative(path)}")
+    print(f"{len(rows)} cases, largest difference {worst:.1e}; wrote {args.csv}")
     return 0
 
 
