@@ -74,16 +74,17 @@ def write_table(runs_csv, root, table_csv, envs, seeds) -> list[dict]:
     recorded = {(row["algorithm"], row["env"], int(row["seed"])) for row in read_rows(runs_csv)}
     table = []
     for env_id in envs:
-        row = {"env": env_id}
+        row, means = {"env": env_id}, {}
         for algorithm in ALGORITHMS:
             done = [seed for seed in seeds if (algorithm, env_id, seed) in recorded]
             both = np.array([scores(Path(root) / run_name(algorithm, env_id, seed)) for seed in done]).reshape(-1, 2)
-            row[f"{algorithm}_all_training"] = round(float(both[:, 0].mean()), 3) if len(both) else float("nan")
-            row[f"{algorithm}_last_100"] = round(float(both[:, 1].mean()), 3) if len(both) else float("nan")
+            means[algorithm] = both.mean(axis=0) if len(both) else np.full(2, np.nan)
+            row[f"{algorithm}_all_training"], row[f"{algorithm}_last_100"] = np.round(means[algorithm], 3).tolist()
             row[f"{algorithm}_seeds"] = len(done)
-        for rule in ("all_training", "last_100"):
-            ppo, a2c = row[f"PPO_{rule}"], row[f"A2C_{rule}"]
-            row[f"winner_{rule}"] = "" if np.isnan(ppo) or np.isnan(a2c) else "PPO" if ppo > a2c else "A2C"
+        for column, rule in enumerate(("all_training", "last_100")):  # decided on the means before rounding
+            ppo, a2c = means["PPO"][column], means["A2C"][column]
+            winner = "PPO" if ppo > a2c else "A2C" if a2c > ppo else "tie"
+            row[f"winner_{rule}"] = "" if np.isnan(ppo) or np.isnan(a2c) else winner
         table.append(row)
     common.write_rows(table_csv, table)
     return table

@@ -350,7 +350,7 @@ def main(argv=None) -> int:
         return common.show_list(runs, args.csv, FIELDS)
     check_tasks(args.tasks)
     if "sb3" in args.libraries and importlib.util.find_spec("stable_baselines3") is None:
-        install = 'pip install torch==2.13.0 (the CPU wheel) and then pip install -e ".[peers]"'
+        install = 'pip install torch==2.13.0 (the CPU wheel) and then pip install -e ".[bench]"'
         common.fail(f"Stable-Baselines3 is not installed: {install}")
     try:  # Ray pickles the task; on a cluster this module is only on this machine, so it goes by value
         from ray import cloudpickle
