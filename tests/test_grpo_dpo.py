@@ -93,12 +93,14 @@ def test_the_enumerated_responses_are_a_distribution_and_pi_star_closes_the_gap(
     assert len(tokens) == 1 + (lm.V - 1) * lm.V and lengths[0] == 1
     logp_ref = response_log_probs(model, prompts)
     assert_close(np.exp(logp_ref).sum(axis=1), np.ones(72), atol=1e-12)
-    scores = short_response_scores(reward_model)
+    scores = short_response_scores(reward_model, prompts)
+    texts = np.concatenate([prompts[:1].repeat(len(tokens), axis=0), tokens], axis=1)
+    assert_close(scores[0], reward_model.score(texts, 3 + lengths) - reward_model.score(texts[:1], np.array([3]))[0])
     beta = 0.5
     logp_star, log_z = optimal_log_probs(logp_ref, scores, beta)
 
     def objective(logp):
-        return float(np.mean(np.sum(np.exp(logp) * (scores[None, :] - beta * (logp - logp_ref)), axis=1)))
+        return float(np.mean(np.sum(np.exp(logp) * (scores - beta * (logp - logp_ref)), axis=1)))
 
     assert np.isclose(objective(logp_star), beta * log_z.mean())  # J(π*) = β Ê log Z
     assert np.isclose(objective(logp_star) - objective(logp_ref), beta * mean_kl(logp_ref, logp_star))
