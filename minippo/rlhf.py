@@ -40,7 +40,7 @@ from minippo.language import (
 )
 from minippo.optimizer import Adam
 from minippo.ppo import Config, update_minibatch
-from minippo.reward_model import RewardModel, make_preferences, rater_score, token_counts
+from minippo.reward_model import RewardModel, make_preferences, rater_score
 
 
 @dataclass
@@ -225,7 +225,8 @@ def pretrained_pieces(seed: int = 0, corpus_size: int = 3000, pairs: int = 2000,
     """The two pieces RLHF starts from, made from ``seed``: the language model pretrained on a corpus of the grammar
     (π_ref), and the reward model fitted to the rater's preferences. Returns (model, reward model, record), the
     record holding the pretraining losses, the reward model's losses, its agreement with the rater on its own pairs
-    and on fresh ones (where ties count half), and those pairs themselves (``preferences``: preferred, rejected)."""
+    and on fresh ones (where ties count half), that of a model blind to the prompt (one weight per word) on the fresh
+    ones, and the training pairs themselves (``preferences``: preferred, rejected)."""
     rng = np.random.default_rng(seed)
     tokens, lengths = make_corpus(corpus_size, rng)
     model = new_language_model(rng, hidden)
@@ -233,6 +234,8 @@ def pretrained_pieces(seed: int = 0, corpus_size: int = 3000, pairs: int = 2000,
     preferred, rejected = make_preferences(pairs, rng)
     reward_model = RewardModel(prompt_len=PROMPT_LEN)
     reward_losses = reward_model.fit(preferred, rejected)
+    blind = RewardModel(prompt_len=PROMPT_LEN, by_subject=False)  # the same fit, with one weight per word only
+    blind.fit(preferred, rejected)
     held_out = make_preferences(pairs, rng)
     rule = [np.array([rater_score(VOCAB[t] for t in row[:n]) for row, n in zip(*side)]) for side in held_out]
     record = {
@@ -240,6 +243,7 @@ def pretrained_pieces(seed: int = 0, corpus_size: int = 3000, pairs: int = 2000,
         "reward_losses": reward_losses,
         "train_accuracy": reward_model.accuracy(preferred, rejected),
         "held_out_accuracy": reward_model.accuracy(*held_out),
+        "blind_held_out_accuracy": blind.accuracy(*held_out),
         # the rater's own rule as a model: the most any model can agree with the rater's noisy choices
         "rule_held_out_accuracy": float(np.mean((rule[0] > rule[1]) + 0.5 * (rule[0] == rule[1]))),
         "preferences": (preferred, rejected),
@@ -296,11 +300,15 @@ def response_log_probs(model: ActorCritic, prompts: np.ndarray) -> np.ndarray:
     return np.concatenate([first[:, [TOKEN[EOS]]], two.reshape(m, -1)], axis=1)
 
 
-def short_response_scores(reward_model: RewardModel) -> np.ndarray:
-    """R(x, y) of every short response, (K,): the reward model reads the response only, so it is the same for every
-    prompt."""
+def short_response_scores(reward_model: RewardModel, prompts: np.ndarray) -> np.ndarray:
+    """R(x, y) of every short response (short_responses' order) to every prompt (m, P), (m, K): the reward model reads
+    the prompt's noun and counts the response's tokens."""
     tokens, lengths = short_responses()
-    return token_counts(tokens, lengths) @ reward_model.weights
+    m, P = prompts.shape
+    texts = np.concatenate([np.repeat(prompts, len(tokens), axis=0), np.tile(tokens, (m, 1))], axis=1)
+    at_most = RewardModel(reward_model.l2, P, reward_model.by_subject)  # the same weights, the prompt P tokens long
+    at_most.weights = reward_model.weights
+    return at_most.score(texts, P + np.tile(lengths, m)).reshape(m, len(tokens))
 
 
 def optimal_log_probs(logp_ref: np.ndarray, scores: np.ndarray, beta: float):

@@ -93,12 +93,18 @@ def test_the_enumerated_responses_are_a_distribution_and_pi_star_closes_the_gap(
     assert len(tokens) == 1 + (lm.V - 1) * lm.V and lengths[0] == 1
     logp_ref = response_log_probs(model, prompts)
     assert_close(np.exp(logp_ref).sum(axis=1), np.ones(72), atol=1e-12)
-    scores = short_response_scores(reward_model)
+    scores = short_response_scores(reward_model, prompts)
+    for i in (0, len(lm.VERBS)):  # "the cat is", "the dog is": the scores depend on the prompt's noun
+        texts = np.concatenate([prompts[i : i + 1].repeat(len(tokens), axis=0), tokens], axis=1)
+        # the reward model on whole texts counts the verb too (its prompt is DET NOUN): take the verb's weight away
+        verb_only = reward_model.score(texts[:1], np.array([3]))[0]
+        assert_close(scores[i], reward_model.score(texts, 3 + lengths) - verb_only)
+    assert not np.allclose(scores[0], scores[len(lm.VERBS)])
     beta = 0.5
     logp_star, log_z = optimal_log_probs(logp_ref, scores, beta)
 
     def objective(logp):
-        return float(np.mean(np.sum(np.exp(logp) * (scores[None, :] - beta * (logp - logp_ref)), axis=1)))
+        return float(np.mean(np.sum(np.exp(logp) * (scores - beta * (logp - logp_ref)), axis=1)))
 
     assert np.isclose(objective(logp_star), beta * log_z.mean())  # J(π*) = β Ê log Z
     assert np.isclose(objective(logp_star) - objective(logp_ref), beta * mean_kl(logp_ref, logp_star))

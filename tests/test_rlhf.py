@@ -6,7 +6,7 @@ import pytest
 from conftest import assert_close, numerical_gradient
 
 from minippo import language as lm
-from minippo.reward_model import RewardModel, bradley_terry_loss, make_preferences, rater_score, token_counts
+from minippo.reward_model import TASTES, RewardModel, bradley_terry_loss, make_preferences, rater_score
 from minippo.rlhf import (
     RLHFConfig,
     collect,
@@ -37,7 +37,14 @@ def test_the_grammar_writes_well_formed_sentences_and_the_checker_rejects_others
 def test_the_rater_counts_words_and_ranks_ill_formed_sentences_last():
     assert rater_score("the cat is good and great but sad .".split()) == 1.0
     assert rater_score("the cat is bad and sad but poor and dull and awful .".split()) == -5.0
-    assert rater_score("the cat is good good good .".split()) < -5.0
+    worst = "the cat is bad and sad but poor and dull and awful and big ."
+    assert rater_score(worst.split()) == -6.0 > rater_score("the cat is good good good .".split())
+
+
+def test_the_raters_taste_depends_on_the_subject():
+    assert rater_score("the cat is small .".split()) == 1.0 and rater_score("the dog is small .".split()) == -1.0
+    assert rater_score("a day was long and good .".split()) == 0.0 and rater_score("a meal was long .".split()) == 1.0
+    assert rater_score("my song is old .".split()) == 1.0 and rater_score("my film is old .".split()) == -1.0
 
 
 def test_prefix_features_describe_the_prefix():
@@ -81,14 +88,48 @@ def test_bradley_terry_loss_is_finite_for_huge_margins():
     assert np.isclose(loss, 500.0) and np.allclose(grad_w, [0.0, -0.5]) and np.allclose(grad_l, [0.0, 0.5])
 
 
-def test_reward_model_gradient_matches_finite_differences(rng):
-    model = RewardModel(l2=0.1)
-    model.weights[...] = rng.standard_normal(lm.V)
-    counts_w = token_counts(*lm.make_corpus(6, rng))
-    counts_l = token_counts(*lm.make_corpus(6, rng))
-    _, analytic = model.loss_and_grad(counts_w, counts_l)
-    numeric = numerical_gradient(lambda: model.loss_and_grad(counts_w, counts_l)[0], model.weights)
+def reference_scores(model: RewardModel, tokens: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """r(x, y) = Σ_t (θ_{y_t} + Θ_{n(x), y_t}) over the response's tokens, word by word, without model.features."""
+    theta, by_noun = model.weights[: lm.V], np.zeros((len(lm.NOUNS), lm.V))
+    if model.by_subject:
+        by_noun = model.weights[lm.V :].reshape(len(lm.NOUNS), lm.V)
+    scores = []
+    for row, n in zip(tokens, lengths):
+        noun = lm.NOUNS.index(lm.VOCAB[row[1]])  # a corpus text is DET NOUN ...
+        scores.append(sum(theta[t] + by_noun[noun, t] for t in row[model.prompt_len : n]))
+    return np.array(scores)
+
+
+@pytest.mark.parametrize("by_subject", [True, False])
+def test_reward_model_gradient_matches_finite_differences(rng, by_subject):
+    """The analytic gradient (through model.features) against central differences of the loss computed from
+    reference_scores, so that a (noun, word) block put in the wrong place (the noun ignored, or another's) shows."""
+    model = RewardModel(l2=0.1, by_subject=by_subject)
+    model.weights[...] = rng.standard_normal(model.weights.shape)
+    preferred, rejected = lm.make_corpus(24, rng), lm.make_corpus(24, rng)
+    _, analytic = model.loss_and_grad(model.features(*preferred), model.features(*rejected))
+
+    def loss():
+        bt, _, _ = bradley_terry_loss(reference_scores(model, *preferred), reference_scores(model, *rejected))
+        return bt + 0.5 * model.l2 * float(model.weights @ model.weights)
+
+    numeric = numerical_gradient(loss, model.weights)
     assert_close(analytic, numeric)
+    if by_subject:  # the data reach several subjects' blocks, so a block in the wrong place cannot pass
+        data_part = (numeric - model.l2 * model.weights)[lm.V :].reshape(len(lm.NOUNS), lm.V)
+        assert np.count_nonzero(np.abs(data_part).max(axis=1) > 1e-6) >= 4
+    else:
+        assert analytic.shape == (lm.V,)
+
+
+def test_the_reward_model_weighs_a_word_by_the_prompts_subject():
+    model = RewardModel()
+    small = lm.TOKEN["small"]
+    model.weights[small] = 0.5  # θ_small, for every subject
+    model.weights[lm.V + lm.NOUNS.index("cat") * lm.V + small] = 2.0  # Θ_{cat, small}
+    texts = np.stack([lm.encode(f"the {noun} is small .".split()) for noun in ("cat", "dog")])
+    assert_close(model.score(texts, np.array([5, 5])), [2.5, 0.5])
+    assert model.word_weights("cat")[small] == 2.5 and model.word_weights("dog")[small] == 0.5
 
 
 def test_kl_shaped_rewards_by_hand():
@@ -121,10 +162,14 @@ def test_pretraining_learns_the_grammar_and_the_reward_model_the_rule(pieces):
     tokens, lengths = lm.generate(model, 300, np.random.default_rng(1))
     well_formed = np.mean([lm.is_well_formed([lm.VOCAB[t] for t in row[:n]]) for row, n in zip(tokens, lengths)])
     assert well_formed > 0.85, well_formed
-    weights = dict(zip(lm.VOCAB, reward_model.weights))
-    assert min(weights[w] for w in lm.POSITIVE) > 0.5 and max(weights[w] for w in lm.NEGATIVE) < -0.5
-    assert max(abs(weights[w]) for w in lm.NEUTRAL + lm.NOUNS) < 0.35
+    weights = {noun: dict(zip(lm.VOCAB, reward_model.word_weights(noun))) for noun in lm.NOUNS}
+    assert np.mean([weights[noun][w] for noun in lm.NOUNS for w in lm.POSITIVE]) > 0.5
+    assert np.mean([weights[noun][w] for noun in lm.NOUNS for w in lm.NEGATIVE]) < -0.5
+    for noun in lm.NOUNS:
+        for word, taste in TASTES[noun].items():
+            assert weights[noun][word] * taste > 0.1, (noun, word)  # it learned the subject's taste
     assert record["held_out_accuracy"] > 0.65
+    assert record["held_out_accuracy"] > record["blind_held_out_accuracy"]  # reading the subject helps
 
 
 @pytest.mark.timeout(300)
