@@ -1,6 +1,6 @@
 """What the book's pages share, so that each page can stay about PPO: the plot style, central finite differences
-(minippo.gradcheck), the two CartPole settings (minippo.presets), one batch collected from a fresh policy, and K
-epochs of minibatch Adam on that one batch.
+(minippo.gradcheck), the two CartPole settings (minippo.presets), one batch collected from a fresh policy, K
+epochs of minibatch Adam on that one batch, Markdown tables, and whether a record's commit ran the code at hand.
 
 Every page imports it first (its cells run with ``book/`` as the working directory).
 """
@@ -8,6 +8,8 @@ Every page imports it first (its cells run with ``book/`` as the working directo
 from __future__ import annotations
 
 import os
+import subprocess
+from pathlib import Path
 
 # the pages multiply small matrices, for which extra BLAS threads cost more in start-up than they save
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -47,6 +49,7 @@ __all__ = [
     "epochs_on_one_batch",
     "markdown_table",
     "one_batch",
+    "unchanged_since",
 ]
 
 # The book's two CartPole settings and its finite differences, from minippo (one copy each)
@@ -102,3 +105,22 @@ def markdown_table(header, rows) -> str:
     so a table of a few short numbers fits a phone where a printed one would not."""
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     return "\n".join(lines + ["| " + " | ".join(row) + " |" for row in rows])
+
+
+def unchanged_since(commit: str, paths) -> bool | None:
+    """Whether a record made at ``commit`` ran the code at hand: ``commit`` is an ancestor of HEAD, and the files
+    ``paths`` (relative to the repository) are the same there as in this working tree. False for a "+dirty" commit
+    (its edits are unknown); None where git or the commit is not at hand (no git, or a shallow clone)."""
+    if commit.endswith("+dirty"):
+        return False
+    root = Path(__file__).resolve().parent.parent
+
+    def git(*args: str) -> int:
+        return subprocess.run(["git", *args], cwd=root, capture_output=True).returncode
+
+    try:
+        if git("cat-file", "-e", f"{commit}^{{commit}}") != 0:
+            return None
+    except OSError:
+        return None
+    return git("merge-base", "--is-ancestor", commit, "HEAD") == 0 and git("diff", "--quiet", commit, "--", *paths) == 0

@@ -371,15 +371,27 @@ def build_parser() -> Parser:
     return parser
 
 
+def from_preset(args, field: str) -> str | None:
+    """The --preset that set ``field`` (None when no preset did, or when --config set it again)."""
+    preset = getattr(args, "preset", None)
+    if not preset or field not in PRESETS[preset]:
+        return None
+    return None if any(text.split("=")[0].strip() == field for text in args.config) else preset
+
+
 def main(argv=None) -> int:
+    args = None
     try:
         args = build_parser().parse_args(argv)
         return args.func(args)
     except ConfigError as error:  # a field's message, in the words of the option that set it
         message = str(error)
         flag = FLAGS.get(error.field)
+        preset = from_preset(args, error.field) if args is not None and error.field else None
         if flag is not None and message.startswith(error.field):
             message = flag + message[len(error.field) :]
+        elif preset is not None:
+            message = f"--preset {preset}: {message}"
         elif error.field and message.startswith(error.field):
             message = f"--config {message}"
         elif not error.field:
@@ -392,3 +404,7 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("minippo: interrupted", file=sys.stderr)
         return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

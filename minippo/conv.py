@@ -114,7 +114,8 @@ class ConvTrunk:
 
     def init(self, rng: np.random.Generator, out_gain: float, hidden_gain: float, orthogonal_init: bool = True):
         """Orthogonal weights (the kernel as a (kh·kw·C, F) matrix) with gain ``out_gain``, zero biases; or
-        LeCun-uniform. Both layers are followed by a ReLU, so both take the trunk's gain."""
+        LeCun-uniform. Both layers are followed by a ReLU, so both take the trunk's gain, ``out_gain``;
+        ``hidden_gain`` is not used (it is there so that ``ActorCritic`` calls every trunk as it calls ``MLP.init``)."""
         for weights in (self.K, self.W):
             matrix = weights.reshape(-1, weights.shape[-1])
             if orthogonal_init:

@@ -91,13 +91,6 @@ def make_env(env_id: str, render_mode: str | None = None, size: int | None = Non
     return FlatImages(env) if len(env.observation_space.shape) == 3 else env
 
 
-def action_bounds(env: gym.Env):
-    space = env.action_space
-    if isinstance(space, gym.spaces.Box):
-        return space.low.astype(np.float64), space.high.astype(np.float64)
-    return None, None
-
-
 # an environment in the middle of its episode, saved so that a resumed run steps on exactly as it would have
 
 CLASSIC_STATE = ("state", "steps_beyond_terminated", "last_u")  # what the classic-control tasks carry between steps

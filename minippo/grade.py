@@ -445,6 +445,9 @@ def grade(
     if gradescope is not None and not Path(gradescope).expanduser().resolve().parent.is_dir():
         print(f"minippo: error: no folder for the results file {gradescope}", file=sys.stderr)
         return 2
+    if gradescope is not None and Path(gradescope).expanduser().is_dir():
+        print(f"minippo: error: {gradescope} is a folder; --gradescope takes the results file's name", file=sys.stderr)
+        return 2
     if not _check_pytest_timeout():
         return 2
     files = chapter_files()

@@ -345,6 +345,7 @@ def test_gradescope_results_say_the_first_failure_and_the_integrity_notes():
         (["--autograder-zip", "x.zip", "--repo", "a b", "--commit", "abc1234"], "not a repository address"),
         (["--submission", "/no/such/folder"], "no submission folder"),
         (["--gradescope", "/no/such/folder/results.json"], "no folder for the results file"),
+        (["--gradescope", "minippo"], "minippo is a folder"),  # before grading, not a traceback after it
     ],
 )
 def test_bad_gradescope_arguments_get_one_line_and_exit_code_2(args, message):

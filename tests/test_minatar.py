@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 from conftest import assert_close, numerical_gradient
 
+from minippo import losses
 from minippo.agent import ActorCritic
 from minippo.cli import main
-from minippo.ppo import Config, loss_and_grad, train
+from minippo.ppo import Config, Trainer, loss_and_grad, train
 from minippo.presets import A2C, ATARI, CARTPOLE_PPO, preset_overrides
 
 needs_minatar = pytest.mark.skipif(
@@ -64,10 +65,26 @@ def test_presets_read_back_through_config_overrides():
     assert A2C["epochs"] == 1 and A2C["minibatch_size"] == A2C["num_envs"] * A2C["horizon"]  # one step a batch
 
 
-def test_clip_annealing_follows_the_step_size(tmp_path):
-    config = Config(**CARTPOLE_PPO, total_steps=4 * 512, clip_epsilon=0.2, anneal_clip=True, seed=2)
-    rows = train(config)
-    assert all(row["lr"] == pytest.approx(2.5e-4 * (1 - i / 4)) for i, row in enumerate(rows))
+@pytest.mark.parametrize("anneal_clip", [True, False])
+def test_clip_annealing_follows_the_step_size(monkeypatch, anneal_clip):
+    # the ε that each update's minibatches hand to L^CLIP: 0.2·α with α = 1 − (k − 1)/K at update k, or 0.2 throughout
+    seen = []
+    clip_objective = losses.clip_objective
+
+    def recording(logp, logp_old, advantages, epsilon):
+        seen.append(epsilon)
+        return clip_objective(logp, logp_old, advantages, epsilon)
+
+    monkeypatch.setattr(losses, "clip_objective", recording)
+    config = Config(**CARTPOLE_PPO, total_steps=4 * 512, clip_epsilon=0.2, anneal_clip=anneal_clip, seed=2)
+    trainer = Trainer(config)
+    assert config.num_updates == 4
+    for update in range(1, 5):
+        seen.clear()
+        alpha = 1 - (update - 1) / 4
+        assert trainer.run_update()["lr"] == pytest.approx(2.5e-4 * alpha)
+        assert len(seen) == config.epochs * (512 // config.minibatch_size)
+        assert seen == pytest.approx([0.2 * alpha if anneal_clip else 0.2] * len(seen))
 
 
 def test_a2c_learns_cartpole():
@@ -128,4 +145,10 @@ def test_train_breakout_with_the_atari_preset(tmp_path, capsys):
 def test_cnn_on_flat_observations_is_a_one_line_error(tmp_path, capsys):
     code = main(["train", "CartPole-v1", "--steps", "1024", "--preset", "atari", "--out", str(tmp_path), "--quiet"])
     assert code == 2
-    assert "needs image observations" in capsys.readouterr().err
+    err = capsys.readouterr().err.strip()
+    # the preset set the network, so the message names the preset, not a --config the user never typed
+    assert err == "minippo: error: --preset atari: network=minatar_cnn needs image observations; CartPole-v1 has none"
+    code = main(["train", "CartPole-v1", "--steps", "1024", "--preset", "atari", "--out", str(tmp_path), "--quiet",
+                 "--config", "network=minatar_cnn"])  # fmt: skip
+    assert code == 2
+    assert capsys.readouterr().err.startswith("minippo: error: --config network=minatar_cnn needs image observations")

@@ -191,12 +191,12 @@ def contrast(first: str, second: str) -> float:
     return (light + 0.05) / (dark + 0.05)
 
 
-TABLE_PAGES = ("13-language-model.html", "14-grpo-dpo.html")
+TABLE_PAGES = ("12-pixels.html", "13-language-model.html", "14-grpo-dpo.html")
 
 
 @pytest.mark.parametrize("page", TABLE_PAGES)
-def test_the_tables_of_the_rlhf_chapters_fit_a_phone(driver, site, page):
-    """Chapters 13 and 14 show their results as tables of a few short numbers: on a 390-pixel phone each must be
+def test_the_tables_of_chapters_12_to_14_fit_a_phone(driver, site, page):
+    """Chapters 12, 13 and 14 show results as tables of a few short numbers: on a 390-pixel phone each must be
     read whole, without scrolling sideways inside its box."""
     open_page(driver, site + page, PHONE, mobile=True)
     tables = driver.execute_script(
