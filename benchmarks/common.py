@@ -47,20 +47,15 @@ def invocation(module: str, argv) -> str:
 def compact_progress(run_dir, digits: int = 6) -> None:
     """Round progress.csv's numbers to ``digits`` significant digits (it is committed; full floats triple its size)."""
     path = Path(run_dir) / "progress.csv"
-    rows = read_rows(path)
-    if not rows:
-        return
 
     def short(text: str) -> str:
         try:
-            value = float(text)
+            return text if text.lstrip("-").isdigit() else f"{float(text):.{digits}g}"
         except ValueError:
             return text
-        if value.is_integer() and abs(value) < 1e15 and "." not in text and "e" not in text.lower():
-            return text
-        return f"{value:.{digits}g}"
 
-    write_rows(path, [{k: short(v) for k, v in row.items()} for row in rows])
+    if rows := read_rows(path):
+        write_rows(path, [{k: short(v) for k, v in row.items()} for row in rows])
 
 
 def write_rows(path, rows: list[dict], fields=None) -> Path:
@@ -77,11 +72,12 @@ def write_rows(path, rows: list[dict], fields=None) -> Path:
 
 
 def add_sweep_options(parser) -> None:
-    """The engine's options, as ``minippo sweep`` has them."""
+    """The engine's options, as ``minippo sweep`` has them, and ``--list``."""
     parser.add_argument("--workers", type=int, help="trainings at once (default: every core, or the cluster's CPUs)")
     parser.add_argument("--address", help="a running Ray cluster, HOST:PORT (default: $RAY_ADDRESS, else this machine)")
     parser.add_argument("--retries", type=int, default=0, help="tries again a failed training this many times")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--list", action="store_true", help="show what is recorded and what is left, then stop")
 
 
 def check_steps(steps: int, least: int = 2048) -> None:
@@ -89,28 +85,31 @@ def check_steps(steps: int, least: int = 2048) -> None:
         fail(f"--steps must be at least one horizon ({least}), not {steps}")
 
 
-def label_key(runs, fields) -> list[str]:
-    """The record's columns that name a run: its labels, in the record's order."""
-    return [field for field in fields if runs and field in runs[0].labels]
+def keyed(runs, record_csv, fields) -> tuple[list, dict, dict]:
+    """(key, {a run's key: run}, {a row's key: row of ``record_csv``}): a key is the values, as text, of the record's
+    columns that name a run (its labels), in the record's order."""
+    key = [field for field in fields if runs and field in runs[0].labels]
+    named = {tuple(str(run.labels[k]) for k in key): run for run in runs}
+    return key, named, {tuple(row[k] for k in key): row for row in read_rows(record_csv)}
 
 
 def todo(runs, record_csv, fields) -> list:
     """The runs that ``record_csv`` does not hold yet."""
-    key = label_key(runs, fields)
-    recorded = {tuple(row[k] for k in key) for row in read_rows(record_csv)}
-    return [run for run in runs if tuple(str(run.labels[k]) for k in key) not in recorded]
+    _, named, recorded = keyed(runs, record_csv, fields)
+    return [run for name, run in named.items() if name not in recorded]
 
 
 def show_list(runs, record_csv, fields) -> int:
     """``--list``: every run, recorded (with its scores) or still to do."""
-    key = label_key(runs, fields)
-    done = {tuple(row[k] for k in key): row for row in read_rows(record_csv)}
-    shown = [{k: f"seed {run.labels[k]}" if k == "seed" else str(run.labels[k]) for k in key} for run in runs]
-    widths = {k: max(len(labels[k]) for labels in shown) for k in key}
-    for run, labels in zip(runs, shown):
-        row = done.get(tuple(str(run.labels[k]) for k in key), {})
-        label = "  ".join(f"{labels[k]:<{widths[k]}}" for k in key)
-        scores = "".join(f"  {name[:-5]} {row[name]:>9}" for name in ("return_mean", "eval_mean") if name in row)
+    key, named, recorded = keyed(runs, record_csv, fields)
+    shown = [[f"seed {v}" if k == "seed" else v for k, v in zip(key, name)] for name in named]
+    widths = [max(map(len, column)) for column in zip(*shown)]
+    for name, texts in zip(named, shown):
+        row = recorded.get(name, {})
+        label = "  ".join(f"{text:<{width}}" for text, width in zip(texts, widths))
+        scores = "".join(
+            f"  {column[:-5]} {row[column]:>9}" for column in ("return_mean", "eval_mean") if column in row
+        )
         print(f"{'recorded' if row else 'to do':<8}  {label}{scores}")
     return 0
 
@@ -119,8 +118,8 @@ def record_sweep(runs, root, record_csv, fields: list[str], more=None) -> int:
     """Copy the ok rows of ``root/sweep.csv`` that ``record_csv`` lacks into it (their labels, then steps, return,
     clock, commit and command, and ``more(folder)``'s columns), rounding each run's progress.csv; returns how many
     were added."""
-    key = label_key(runs, fields)
-    left = {tuple(str(run.labels[k]) for k in key): run for run in todo(runs, record_csv, fields)}
+    key, named, recorded = keyed(runs, record_csv, fields)
+    left = {name: run for name, run in named.items() if name not in recorded}
     added = 0
     for row in read_rows(Path(root) / "sweep.csv"):
         run = left.pop(tuple(row[k] for k in key), None) if row["status"] == "ok" else None
@@ -144,7 +143,7 @@ def run_sweep(runs, root, record_csv, fields: list[str], args, engine=None, more
     from minippo.errors import MinippoError
     from minippo.sweep import Sweep
 
-    if getattr(args, "list", False):
+    if args.list:
         return show_list(runs, record_csv, fields)
     if args.workers is not None and args.workers < 1:
         fail(f"--workers must be at least 1, not {args.workers}")

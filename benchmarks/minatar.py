@@ -109,7 +109,7 @@ def main(argv=None) -> int:
         if not args.score:
             runs = sweep_runs(args.algorithms, args.envs, args.seeds, args.steps)
             code = common.run_sweep(runs, args.runs, args.runs_csv, RUN_FIELDS, args)
-            if code == 130:
+            if code == 130 or args.list:  # interrupted, or only listed: the table waits
                 return code
         for run_dir in sorted(Path(args.runs).glob("*-MinAtar-*")):
             write_episodes(run_dir)

@@ -93,7 +93,13 @@ def sb3_settings(config: Config) -> dict:
 # the Ray task (called like minippo.sweep.train_run, returning the same kind of result plus "eval" and "version")
 
 
-def minippo_version() -> str:
+def version(library: str) -> str:
+    """The library's version and its array library's, as the records and the speed race keep them."""
+    if library == "sb3":
+        import stable_baselines3
+        import torch
+
+        return f"stable-baselines3 {stable_baselines3.__version__}, torch {torch.__version__}"
     import numpy
 
     import minippo
@@ -114,7 +120,7 @@ def minippo_run(config_dict: dict, name: str = "", board=None, resume: dict | No
         policy = Path(scratch) / "policy.npz"
         policy.write_bytes(result["files"]["policy.npz"])
         result["eval"] = evaluate(policy, EVAL_EPISODES, EVAL_SEED)
-    result["version"] = minippo_version()
+    result["version"] = version("minippo")
     return result
 
 
@@ -142,8 +148,6 @@ def sb3_run(config_dict: dict, name: str = "", board=None) -> dict:
     """Stable-Baselines3 PPO with ``sb3_settings(config)``, one torch thread, then the same deterministic evaluation
     as minippo's. Its progress.csv has minippo's columns where SB3 has the number (one row per update)."""
     import numpy as np
-    import stable_baselines3
-    import torch
     from stable_baselines3.common.callbacks import BaseCallback
     from threadpoolctl import threadpool_limits
 
@@ -195,9 +199,8 @@ def sb3_run(config_dict: dict, name: str = "", board=None) -> dict:
 
     node = ray.get_runtime_context().get_node_id()[:12] if ray.is_initialized() else ""
     files = {"config.json": json.dumps(described, indent=2) + "\n", "progress.csv": "\n".join(lines) + "\n"}
-    version = f"stable-baselines3 {stable_baselines3.__version__}, torch {torch.__version__}"
     result = {"files": {key: text.encode() for key, text in files.items()}, "last": rows[-1], "eval": episodes}
-    return result | {"version": version, "node": node, "host": socket.gethostname(), "pid": os.getpid()}
+    return result | {"version": version("sb3"), "node": node, "host": socket.gethostname(), "pid": os.getpid()}
 
 
 def sb3_evaluate(model, venv, env_id: str, episodes: int, seed: int) -> list[float]:
@@ -319,7 +322,7 @@ def evaluate_record(runs_csv, runs_root, record_csv, tasks=TASKS) -> int:
         if not (folder / "policy.npz").exists():
             common.fail(f"no policy.npz in {folder}: the final policies stay on the machine that trained them")
         returns = evaluate(folder, EVAL_EPISODES, EVAL_SEED)
-        row = {"library": "minippo", "version": minippo_version(), "task": run["env"], **run}
+        row = {"library": "minippo", "version": version("minippo"), "task": run["env"], **run}
         row["eval_mean"] = round(statistics.fmean(returns), 2)
         append_row(record_csv, FIELDS, row)
         added += 1
@@ -334,7 +337,6 @@ def main(argv=None) -> int:
     parser.add_argument("--libraries", nargs="+", default=LIBRARIES, choices=LIBRARIES)
     parser.add_argument("--csv", default=str(CSV_PATH), help="where to append the records")
     parser.add_argument("--runs", default=str(RUN_ROOT), help="the folder of run folders")
-    parser.add_argument("--list", action="store_true", help="show what is recorded and what is left, then stop")
     parser.add_argument("--evaluate", metavar="RUNS_CSV", help="record minippo's side from these runs (in --runs)")
     common.add_sweep_options(parser)
     args = parser.parse_args(argv)

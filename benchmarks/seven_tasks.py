@@ -41,7 +41,6 @@ def main(argv=None) -> int:
     parser.add_argument("--steps", type=int, default=STEPS)
     parser.add_argument("--csv", default=str(CSV_PATH), help="where to append the records")
     parser.add_argument("--runs", default=str(RUN_ROOT), help="the folder of run folders")
-    parser.add_argument("--list", action="store_true", help="show what is recorded and what is left, then stop")
     common.add_sweep_options(parser)
     args = parser.parse_args(argv)
     unknown = [env_id for env_id in args.envs if env_id not in TASKS]

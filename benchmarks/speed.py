@@ -63,21 +63,6 @@ def raw_stepping(env_id: str, steps: int, seed: int) -> float:
     return steps / elapsed
 
 
-class MinippoContender:
-    def __init__(self, env_id: str, seed: int):
-        from minippo.ppo import Trainer
-
-        self.trainer = Trainer(race_config(env_id, seed))
-        self.trainer.run_update()  # warm-up: first touches of memory, caches, lazy imports
-
-    def measure(self, updates: int) -> tuple[float, int]:
-        steps_before, started = self.trainer.rollout.steps, time.perf_counter()
-        for _ in range(updates):
-            self.trainer.run_update()
-        steps = self.trainer.rollout.steps - steps_before
-        return steps / (time.perf_counter() - started), steps
-
-
 def sb3_minatar_model(config):
     """SB3 PPO with minippo's ATARI preset translated, on minippo's MinAtar network written in torch."""
     import torch
@@ -110,42 +95,14 @@ def sb3_minatar_model(config):
     return PPO("MlpPolicy", env, policy_kwargs=trunk, device="cpu", seed=config.seed, verbose=0, **settings)
 
 
-class StableBaselinesContender:
-    def __init__(self, env_id: str, seed: int):
-        from benchmarks.peers import sb3_model
-
-        config = race_config(env_id, seed)
-        self.model = sb3_minatar_model(config) if minatar(env_id) else sb3_model(config)[0]  # the peers' settings
-        self.batch = self.model.n_steps * self.model.n_envs
-        self.model.learn(total_timesteps=self.batch)  # warm-up: one rollout and one update
-
-    def measure(self, updates: int) -> tuple[float, int]:
-        steps_before, started = self.model.num_timesteps, time.perf_counter()
-        self.model.learn(total_timesteps=updates * self.batch, reset_num_timesteps=False)
-        steps = self.model.num_timesteps - steps_before
-        return steps / (time.perf_counter() - started), steps
-
-
-def sb3_version() -> str | None:
-    try:
-        import stable_baselines3
-        import torch
-    except ImportError:
-        return None
-    return f"stable-baselines3 {stable_baselines3.__version__}, torch {torch.__version__}"
-
-
 def summarize(env_id: str, rounds: dict[str, list[float]], steps: dict[str, int], versions: dict[str, str]) -> list:
     """One row per contender: the median over rounds, and the ratios of the medians."""
     medians = {name: statistics.median(values) for name, values in rounds.items() if values}
     rows = []
     for name in ("raw", "minippo", "sb3"):
         median = medians.get(name)
-        row = {"env": env_id, "contender": name, "steps_per_s": round(median, 1) if median is not None else ""}
-        row |= {
-            "rounds": ";".join(f"{value:.1f}" for value in rounds.get(name, [])),
-            "steps_per_round": steps.get(name, ""),
-        }
+        row = {"env": env_id, "contender": name, "steps_per_s": "" if median is None else round(median, 1)}
+        row |= {"rounds": ";".join(f"{v:.1f}" for v in rounds.get(name, [])), "steps_per_round": steps.get(name, "")}
         for other in ("raw", "sb3"):
             row[f"vs_{other}"] = round(median / medians[other], 3) if median is not None and other in medians else ""
         rows.append({**row, "version": versions.get(name, "")})
@@ -171,10 +128,6 @@ def sweep_race(args, argv) -> int:
     if args.workers < 1 or args.steps < 2048:
         common.fail("--workers must be at least 1 and --steps at least one horizon (2048)")
 
-    def progress(run_dir) -> list[dict]:  # without the clock columns
-        rows = read_rows(run_dir / "progress.csv")
-        return [{k: v for k, v in row.items() if k not in ("steps_per_s", "wall_s")} for row in rows]
-
     load_before, commit, seconds = os.getloadavg()[0], common.git_commit(), {}  # the code as it starts
     with tempfile.TemporaryDirectory(prefix="sweep-speed-") as scratch:
         alone, swept = Path(scratch) / "alone", Path(scratch) / "swept"
@@ -187,16 +140,19 @@ def sweep_race(args, argv) -> int:
         seconds["sweep"] = time.perf_counter() - started
         if failed:
             common.fail(f"{failed} runs of the sweep failed; see {swept / 'sweep.csv'}")
-        same = all(progress(alone / run.name) == progress(swept / run.name) for run in runs)
-        train = {
-            side: sum(float(read_rows(f / r.name / "progress.csv")[-1]["wall_s"]) for r in runs)
-            for side, f in (("sequential", alone), ("sweep", swept))
-        }
+        sides = {"sequential": alone, "sweep": swept}
+        progress = {side: [read_rows(f / run.name / "progress.csv") for run in runs] for side, f in sides.items()}
+    train = {side: sum(float(rows[-1]["wall_s"]) for rows in runs_rows) for side, runs_rows in progress.items()}
+
+    def unclocked(rows):
+        return [{k: v for k, v in row.items() if k not in ("steps_per_s", "wall_s")} for row in rows]
+
     steps = runs[0].config.num_updates * runs[0].config.batch_size
     row = {"env": args.env, "grid": args.grid, "runs": len(runs), "steps": steps, "workers": args.workers}
     row |= {"cpus": os.cpu_count(), **{f"{side}_s": round(value, 1) for side, value in seconds.items()}}
     row |= {"speedup": round(seconds["sequential"] / seconds["sweep"], 2)}
     row |= {"sequential_train_s": round(train["sequential"], 1), "sweep_train_s": round(train["sweep"], 1)}
+    same = all(unclocked(a) == unclocked(b) for a, b in zip(progress["sequential"], progress["sweep"]))
     row |= {"same_progress": "yes" if same else "no", "load_before": round(load_before, 2)}
     row |= {"load_after": round(os.getloadavg()[0], 2), "commit": commit, "command": common.invocation("speed", argv)}
     append_row(args.csv, SWEEP_FIELDS, row)
@@ -229,36 +185,43 @@ def main(argv=None) -> int:
     args.updates = (5 if minatar(args.env) else 3) if args.updates is None else args.updates
     if args.rounds < 1 or args.updates < 1 or args.raw_steps < 1:
         common.fail("--rounds, --updates and --raw-steps must be positive")
-    import gymnasium as gym
-    import numpy as np
+    import importlib.util
 
-    import minippo
+    import gymnasium as gym
+
+    from benchmarks.peers import sb3_model, version
     from minippo.envs import check_env_id
     from minippo.errors import MinippoError
+    from minippo.ppo import Trainer
 
     try:
         check_env_id(args.env)  # registers the MinAtar games when asked for one
     except MinippoError as error:
         common.fail(str(error))
-    load_before = os.getloadavg()[0]
-    versions = {
-        "raw": f"gymnasium {gym.__version__}",
-        "minippo": f"minippo {minippo.__version__}, numpy {np.__version__}",
-    }
-    contenders = {"minippo": MinippoContender(args.env, args.seed)}
-    sb3 = None if args.no_sb3 else sb3_version()
-    if sb3:
-        versions["sb3"] = sb3
-        contenders["sb3"] = StableBaselinesContender(args.env, args.seed)
-    else:
+    load_before, config = os.getloadavg()[0], race_config(args.env, args.seed)
+    versions = {"raw": f"gymnasium {gym.__version__}", "minippo": version("minippo")}
+    trainer = Trainer(config)  # each trainer after a warm-up update: first touches of memory, caches, lazy imports
+    trainer.run_update()
+    # {name: (steps done so far, run N updates)}
+    contenders = {"minippo": (lambda: trainer.rollout.steps, lambda n: [trainer.run_update() for _ in range(n)])}
+    if args.no_sb3 or importlib.util.find_spec("stable_baselines3") is None:
         versions["sb3"] = "skipped: " + ("--no-sb3" if args.no_sb3 else "stable-baselines3 is not installed")
+    else:
+        versions["sb3"] = version("sb3")
+        model = sb3_minatar_model(config) if minatar(args.env) else sb3_model(config)[0]  # the peers' settings
+        batch = model.n_steps * model.n_envs
+        model.learn(total_timesteps=batch)
+        more = lambda n: model.learn(total_timesteps=n * batch, reset_num_timesteps=False)  # noqa: E731
+        contenders["sb3"] = (lambda: model.num_timesteps, more)
     rounds: dict[str, list[float]] = {name: [] for name in ("raw", "minippo", "sb3")}
     steps: dict[str, int] = {"raw": args.raw_steps}
     for number in range(1, args.rounds + 1):
         rounds["raw"].append(raw_stepping(args.env, args.raw_steps, args.seed + number))
-        for name, contender in contenders.items():
-            speed, steps[name] = contender.measure(args.updates)
-            rounds[name].append(speed)
+        for name, (done, advance) in contenders.items():
+            before, started = done(), time.perf_counter()
+            advance(args.updates)
+            seconds, steps[name] = time.perf_counter() - started, done() - before
+            rounds[name].append(steps[name] / seconds)
         shown = ", ".join(f"{name} {values[-1]:.0f}" for name, values in rounds.items() if values)
         print(f"round {number}: {shown} steps/s", flush=True)
     rows = summarize(args.env, rounds, steps, versions)

@@ -142,6 +142,9 @@ def main(argv=None) -> int:
     if any(not 1 <= number <= len(SETTINGS) for number in numbers):
         common.fail(f"--settings are row numbers of Table 1, from 1 to {len(SETTINGS)}")
     settings = [with_overrides(SETTINGS[number - 1], args.config) for number in numbers]
+    runs = sweep_runs(settings, args.envs, args.seeds, args.steps)
+    if args.list:
+        return common.show_list(runs, args.runs_csv, RUN_FIELDS)
     code = 0  # 1 when a training failed (it is logged in the runs folder's sweep.csv)
     try:
         if args.random or not args.score:
@@ -149,7 +152,6 @@ def main(argv=None) -> int:
         if args.random:
             return 0
         if not args.score:
-            runs = sweep_runs(settings, args.envs, args.seeds, args.steps)
             code = common.run_sweep(runs, args.runs, args.runs_csv, RUN_FIELDS, args)
             if code == 130:  # interrupted: the table waits for the next run of the command
                 return code

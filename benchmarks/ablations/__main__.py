@@ -2,7 +2,7 @@
 as a sweep on minippo sweep's engine.
 
     python -m benchmarks.ablations              # every ablation, seeds 1 and 2, Hopper-v5, 163,840 steps
-    python -m benchmarks.ablations --dry-run    # print the commands of the runs not yet recorded
+    python -m benchmarks.ablations --list       # what is recorded, what is left
     python -m benchmarks.ablations --only default anneal_lr --seeds 3
 
 Each run is ``minippo train ... --config <the detail>=false``, recorded in results.csv with ``return_last10``, the
@@ -52,7 +52,6 @@ def main(argv=None) -> int:
     parser.add_argument("--steps", type=int, default=163_840, help="per run (80 updates of T = 2048 by default)")
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--only", nargs="+", metavar="ABLATION", help=f"a subset of: {', '.join(ABLATIONS)}")
-    parser.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
     common.add_sweep_options(parser)
     args = parser.parse_args(argv)
     unknown = [name for name in args.only or [] if name not in ABLATIONS]
@@ -60,10 +59,6 @@ def main(argv=None) -> int:
         common.fail(f"unknown ablation(s) {', '.join(unknown)}; choose from {', '.join(ABLATIONS)}")
     common.check_steps(args.steps)
     runs = sweep_runs(args.only or ABLATIONS, args.env, args.steps, args.seeds)
-    if args.dry_run:
-        for run in common.todo(runs, RESULTS, FIELDS):
-            print(run.command(common.relative(HERE / "runs")))
-        return 0
     return common.run_sweep(runs, HERE / "runs", RESULTS, FIELDS, args, more=last_ten)
 
 
