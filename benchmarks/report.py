@@ -39,15 +39,20 @@ COLUMNS |= {"table1_1m_more_seeds": SCALE, "same_math": SAME}
 TEMPLATE = Path(__file__).with_name("summary_template.md")
 
 
+def band(ax, folders, colour: str, library: str, **options) -> None:
+    """The seed band of the runs in ``folders`` on ``ax``, labelled with the library and the number of seeds."""
+    curves = seed_curves([read_progress(folder) for folder in folders])
+    if curves is not None:
+        draw_seed_band(ax, *curves, colour, f"{library}, {len(folders)} seeds", **options)
+
+
 def figure_seven_tasks(rows: list[dict], out: Path, runs_root=RUNS / "seven_tasks") -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(2, 4, figsize=(13, 5.6), dpi=100)
     for ax, task in zip(axes.flat, scoring.SEVEN_TASKS):
-        runs = [read_progress(Path(runs_root) / f"{task}-seed{r['seed']}") for r in rows if r["env"] == task]
-        curves = seed_curves(runs)
-        if curves is not None:
-            draw_seed_band(ax, *curves, ORANGE, f"minippo, {len(runs)} seeds", alpha=0.25)
+        folders = [Path(runs_root) / f"{task}-seed{r['seed']}" for r in rows if r["env"] == task]
+        band(ax, folders, ORANGE, "minippo", alpha=0.25)
         ax.axhline(scoring.PAPER_FIGURE3[task][0], color=INK, ls="--", lw=1, label="paper, Fig. 3 (read off)")
         ax.set_title(task, fontsize=10)
     axes.flat[-1].axis("off")
@@ -62,18 +67,9 @@ def figure_peers(rows: list[dict], out: Path, runs_root=RUNS / "peers", minippo_
     tasks = list(dict.fromkeys(row["task"] for row in rows))
     fig, axes = plt.subplots(1, len(tasks), figsize=(4.2 * len(tasks), 3.4), dpi=100, squeeze=False)
     for ax, task in zip(axes[0], tasks):
-        for library, colour in (("minippo", ORANGE), ("sb3", SAGE)):
+        for library, colour, prefix in (("minippo", ORANGE, f"{minippo_root}/"), ("sb3", SAGE, f"{runs_root}/sb3-")):
             seeds = [r["seed"] for r in rows if r["task"] == task and r["library"] == library]
-            folders = [
-                Path(minippo_root) / f"{task}-seed{seed}"
-                if library == "minippo"
-                else Path(runs_root) / f"sb3-{task}-seed{seed}"
-                for seed in seeds
-            ]
-            runs = [read_progress(folder) for folder in folders]
-            curves = seed_curves(runs)
-            if curves is not None:
-                draw_seed_band(ax, *curves, colour, f"{library}, {len(runs)} seeds")
+            band(ax, [Path(f"{prefix}{task}-seed{seed}") for seed in seeds], colour, library)
         ax.set_title(task, fontsize=10)
         ax.legend(frameon=False, fontsize=8, loc="upper left")
     save(fig, out)
