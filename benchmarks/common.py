@@ -5,11 +5,13 @@ own columns (what is recorded and what is left, ``--list``, resuming)."""
 from __future__ import annotations
 
 import csv
+import functools
 import os
 import shlex
 import sys
 from pathlib import Path
 
+from minippo.errors import MinippoError
 from minippo.records import append_row, check_columns, commit_of_code, read_rows
 
 ROOT = Path(__file__).resolve().parent.parent  # the repository
@@ -27,6 +29,19 @@ def fail(message: str) -> None:
     program = Path(sys.argv[0])  # a runner's file, or the folder of a package's __main__.py
     print(f"{program.parent.name if program.stem == '__main__' else program.name}: error: {message}", file=sys.stderr)
     raise SystemExit(2)
+
+
+def one_line_errors(main):
+    """A runner's ``main`` with its BenchmarkError or MinippoError reported on one line (``fail``)."""
+
+    @functools.wraps(main)
+    def guarded(*args, **kwargs):
+        try:
+            return main(*args, **kwargs)
+        except (BenchmarkError, MinippoError) as error:
+            fail(str(error))
+
+    return guarded
 
 
 def relative(path) -> str:
@@ -139,18 +154,15 @@ def run_sweep(runs, root, record_csv, fields: list[str], args, engine=None, more
     """Run the ``runs`` that ``record_csv`` does not hold on minippo sweep's engine into the folder ``root`` (each
     run, failed ones too, is logged in ``root/sweep.csv`` with the node it ran on), then record the finished ones
     (``more``: see ``record_sweep``); with ``args.list``, only show what is recorded and what is left. ``engine``: a
-    ``minippo.sweep.Sweep`` maker whose ``finish`` writes the record itself. Returns the exit code."""
-    from minippo.errors import MinippoError
+    ``minippo.sweep.Sweep`` maker whose ``finish`` writes the record itself. Returns the exit code (runners'
+    ``main``s wear ``one_line_errors``)."""
     from minippo.sweep import Sweep
 
     if args.list:
         return show_list(runs, record_csv, fields)
     if args.workers is not None and args.workers < 1:
         fail(f"--workers must be at least 1, not {args.workers}")
-    try:
-        check_columns(record_csv, fields)
-    except MinippoError as error:
-        fail(str(error))
+    check_columns(record_csv, fields)
     root = relative(root)  # the commands in the records name the folder from the repository's root
     if engine is None:
         record_sweep(runs, root, record_csv, fields, more)  # runs an interrupted invocation finished
@@ -162,8 +174,6 @@ def run_sweep(runs, root, record_csv, fields: list[str], args, engine=None, more
     job = (engine or Sweep)(left, root, **options)
     try:
         code = 1 if job.run() else 0
-    except MinippoError as error:
-        fail(str(error))
     except KeyboardInterrupt:
         print(f"interrupted; {job.recorded} runs recorded; the same command continues", file=sys.stderr)
         code = 130

@@ -17,7 +17,6 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import common
-from minippo.errors import MinippoError
 from minippo.records import read_rows
 
 GAMES = [f"MinAtar/{game}-v1" for game in ("Asterix", "Breakout", "Freeway", "Seaquest", "SpaceInvaders")]
@@ -90,6 +89,7 @@ def write_table(runs_csv, root, table_csv, envs, seeds) -> list[dict]:
     return table
 
 
+@common.one_line_errors
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--envs", nargs="+", default=GAMES, metavar="ENV")
@@ -105,17 +105,14 @@ def main(argv=None) -> int:
     if not args.score and (args.steps is None or args.steps < 1024):
         common.fail("--steps is required, at least one PPO batch (8 × 128 = 1024 steps)")
     code = 0
-    try:
-        if not args.score:
-            runs = sweep_runs(args.algorithms, args.envs, args.seeds, args.steps)
-            code = common.run_sweep(runs, args.runs, args.runs_csv, RUN_FIELDS, args)
-            if code == 130 or args.list:  # interrupted, or only listed: the table waits
-                return code
-        for run_dir in sorted(Path(args.runs).glob("*-MinAtar-*")):
-            write_episodes(run_dir)
-        table = write_table(args.runs_csv, args.runs, args.table_csv, args.envs, args.seeds)
-    except (common.BenchmarkError, MinippoError) as error:
-        common.fail(str(error))
+    if not args.score:
+        runs = sweep_runs(args.algorithms, args.envs, args.seeds, args.steps)
+        code = common.run_sweep(runs, args.runs, args.runs_csv, RUN_FIELDS, args)
+        if code == 130 or args.list:  # interrupted, or only listed: the table waits
+            return code
+    for run_dir in sorted(Path(args.runs).glob("*-MinAtar-*")):
+        write_episodes(run_dir)
+    table = write_table(args.runs_csv, args.runs, args.table_csv, args.envs, args.seeds)
     for rule in ("all_training", "last_100"):
         won = sum(row[f"winner_{rule}"] == "PPO" for row in table)
         print(f"{rule}: PPO wins {won} of {sum(bool(row[f'winner_{rule}']) for row in table)} games")

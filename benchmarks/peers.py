@@ -329,6 +329,7 @@ def evaluate_record(runs_csv, runs_root, record_csv, tasks=TASKS) -> int:
     return added
 
 
+@common.one_line_errors
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--tasks", nargs="+", default=TASKS, metavar="TASK", help="Gymnasium ids (continuous actions)")

@@ -62,6 +62,7 @@ def relative_difference(a: float, b: float) -> float:
     return 0.0 if scale == 0.0 else abs(a - b) / scale
 
 
+@common.one_line_errors
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("earlier", help="the earlier commit to compare with (any git revision)")
@@ -76,22 +77,20 @@ def main(argv=None) -> int:
     if not 1 <= args.updates <= 500:
         common.fail(f"--updates must be between 1 and 500, not {args.updates}")
     try:
+        earlier = git("rev-parse", "--short", "--verify", "--quiet", f"{args.earlier}^{{commit}}")
+    except common.BenchmarkError:
+        raise common.BenchmarkError(f"no commit named {args.earlier!r} in this repository") from None
+    current = common.git_commit()
+    with tempfile.TemporaryDirectory(prefix="minippo-same-math-") as scratch:
+        worktree = Path(scratch) / "earlier"
+        git("worktree", "add", "--detach", str(worktree), earlier)
         try:
-            earlier = git("rev-parse", "--short", "--verify", "--quiet", f"{args.earlier}^{{commit}}")
-        except common.BenchmarkError:
-            raise common.BenchmarkError(f"no commit named {args.earlier!r} in this repository") from None
-        current = common.git_commit()
-        with tempfile.TemporaryDirectory(prefix="minippo-same-math-") as scratch:
-            scratch = Path(scratch)
-            worktree = scratch / "earlier"
-            git("worktree", "add", "--detach", str(worktree), earlier)
-            try:
-                earlier_rows = train(worktree, args.env, args.seed, args.updates, args.dtype, scratch / "earlier-run")
-                current_rows = train(common.ROOT, args.env, args.seed, args.updates, args.dtype, scratch / "run")
-            finally:
-                git("worktree", "remove", "--force", str(worktree))
-    except common.BenchmarkError as error:
-        common.fail(str(error))
+            earlier_rows = train(
+                worktree, args.env, args.seed, args.updates, args.dtype, worktree.with_name("earlier-run")
+            )
+            current_rows = train(common.ROOT, args.env, args.seed, args.updates, args.dtype, worktree.with_name("run"))
+        finally:
+            git("worktree", "remove", "--force", str(worktree))
     table = []
     for before, now in zip(earlier_rows, current_rows):
         row = {"env": args.env, "seed": args.seed, "dtype": args.dtype, "update": now["update"]}

@@ -34,6 +34,7 @@ def sweep_runs(envs, seeds, steps) -> list:
     ]
 
 
+@common.one_line_errors
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--envs", nargs="+", default=TASKS, metavar="ENV")

@@ -118,13 +118,9 @@ def sweep_race(args, argv) -> int:
 
     from minippo import sweep
     from minippo.cli import main as minippo
-    from minippo.errors import MinippoError
     from minippo.records import append_row, read_rows
 
-    try:
-        runs = sweep.plan([args.env], sweep.parse_seeds(args.seeds), args.steps, sweep.parse_grid([args.grid]))
-    except MinippoError as error:
-        common.fail(str(error))
+    runs = sweep.plan([args.env], sweep.parse_seeds(args.seeds), args.steps, sweep.parse_grid([args.grid]))
     if args.workers < 1 or args.steps < 2048:
         common.fail("--workers must be at least 1 and --steps at least one horizon (2048)")
 
@@ -163,6 +159,7 @@ def sweep_race(args, argv) -> int:
     return 0 if same else 1
 
 
+@common.one_line_errors
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--env", default="Hopper-v5", help="a MuJoCo task, or a MinAtar game (MinAtar/<Game>-v1)")
@@ -191,13 +188,9 @@ def main(argv=None) -> int:
 
     from benchmarks.peers import sb3_model, version
     from minippo.envs import check_env_id
-    from minippo.errors import MinippoError
     from minippo.ppo import Trainer
 
-    try:
-        check_env_id(args.env)  # registers the MinAtar games when asked for one
-    except MinippoError as error:
-        common.fail(str(error))
+    check_env_id(args.env)  # registers the MinAtar games when asked for one
     load_before, config = os.getloadavg()[0], race_config(args.env, args.seed)
     versions = {"raw": f"gymnasium {gym.__version__}", "minippo": version("minippo")}
     trainer = Trainer(config)  # each trainer after a warm-up update: first touches of memory, caches, lazy imports

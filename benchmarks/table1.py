@@ -14,7 +14,6 @@ from __future__ import annotations
 import argparse
 
 from benchmarks import common, scoring
-from minippo.errors import MinippoError
 from minippo.records import append_row, read_rows
 
 # (name, objective, Config overrides, the paper's score): the rows of Table 1, as ``minippo train`` options
@@ -120,6 +119,7 @@ def sweep_runs(settings, envs, seeds, steps) -> list:
     return runs
 
 
+@common.one_line_errors
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--envs", nargs="+", default=TASKS, metavar="ENV")
@@ -142,22 +142,19 @@ def main(argv=None) -> int:
     if any(not 1 <= number <= len(SETTINGS) for number in numbers):
         common.fail(f"--settings are row numbers of Table 1, from 1 to {len(SETTINGS)}")
     settings = [with_overrides(SETTINGS[number - 1], args.config) for number in numbers]
-    runs = sweep_runs(settings, args.envs, args.seeds, args.steps)
     if args.list:
-        return common.show_list(runs, args.runs_csv, RUN_FIELDS)
+        return common.show_list(sweep_runs(settings, args.envs, args.seeds, args.steps), args.runs_csv, RUN_FIELDS)
     code = 0  # 1 when a training failed (it is logged in the runs folder's sweep.csv)
-    try:
-        if args.random or not args.score:
-            random_policy(args.envs, args.random_csv)  # the 0 of each task's scale, once
-        if args.random:
-            return 0
-        if not args.score:
-            code = common.run_sweep(runs, args.runs, args.runs_csv, RUN_FIELDS, args)
-            if code == 130:  # interrupted: the table waits for the next run of the command
-                return code
-        table = write_table(args.runs_csv, args.random_csv, args.table_csv, args.envs, args.seeds, args.steps)
-    except (common.BenchmarkError, MinippoError) as error:
-        common.fail(str(error))
+    if args.random or not args.score:
+        random_policy(args.envs, args.random_csv)  # the 0 of each task's scale, once
+    if args.random:
+        return 0
+    if not args.score:
+        runs = sweep_runs(settings, args.envs, args.seeds, args.steps)
+        code = common.run_sweep(runs, args.runs, args.runs_csv, RUN_FIELDS, args)
+        if code == 130:  # interrupted: the table waits for the next run of the command
+            return code
+    table = write_table(args.runs_csv, args.random_csv, args.table_csv, args.envs, args.seeds, args.steps)
     for row in table:
         print(f"{row['setting']:<30} {row['score']:>6.2f}   paper {row['paper_score']:>5.2f}   ({row['runs']} runs)")
     return code

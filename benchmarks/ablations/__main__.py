@@ -46,6 +46,7 @@ def last_ten(folder: Path) -> dict:
     return {"return_last10": round(sum(tail) / len(tail), 2)}
 
 
+@common.one_line_errors
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="benchmarks.ablations", description=__doc__.split("\n\n")[0])
     parser.add_argument("--env", default="Hopper-v5")
