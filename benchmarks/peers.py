@@ -1,6 +1,5 @@
-"""Learning quality side by side with Stable-Baselines3: minippo's PPO and SB3's PPO on the same tasks, settings
-(``sb3_settings`` translates minippo's ``Config``; benchmarks/README.md tabulates each match), seeds and machine, as a
-sweep on minippo sweep's engine; each run scored on its last 100 training episodes and on 10 deterministic episodes.
+"""Learning quality beside Stable-Baselines3: both libraries' PPO on the same tasks, settings (``sb3_settings``;
+benchmarks/README.md tabulates each match), seeds and machine, on minippo sweep's engine.
 
     python -m benchmarks.peers                       # 3 tasks × seeds 1–5 × 2 libraries × 1M steps: 30 runs
     python -m benchmarks.peers --tasks Hopper-v5 --seeds 1 2 --libraries sb3
@@ -38,13 +37,9 @@ CSV_PATH = common.RESULTS / "peers.csv"
 RUN_ROOT = common.RUNS / "peers"
 
 
-# SB3's settings, from minippo's Config
-
-
 def sb3_settings(config: Config) -> dict:
     """The arguments of ``stable_baselines3.PPO`` and ``VecNormalize`` that make SB3 train as minippo does with
-    ``config`` (JSON: the task turns the names into torch objects). Where SB3 cannot do what minippo does, the
-    comment says so; benchmarks/README.md has the whole table."""
+    ``config``, as JSON (``sb3_model`` makes the torch objects); comments say where SB3 cannot do as minippo does."""
     batch = config.num_envs * config.horizon
     return {
         "ppo": {
@@ -90,9 +85,6 @@ def sb3_settings(config: Config) -> dict:
     }
 
 
-# the Ray task (called like minippo.sweep.train_run, returning the same kind of result plus "eval" and "version")
-
-
 def version(library: str) -> str:
     """The library's version and its array library's, as the records and the speed race keep them."""
     if library == "sb3":
@@ -108,8 +100,7 @@ def version(library: str) -> str:
 
 
 def minippo_run(config_dict: dict, name: str = "", board=None, resume: dict | None = None) -> dict:
-    """``minippo train`` as the sweep engine runs it, then minippo's own deterministic evaluation of the final
-    policy (``minippo eval RUN --episodes 10 --seed 0``)."""
+    """The sweep engine's ``train_run``, then ``minippo eval RUN --episodes 10 --seed 0`` of the final policy."""
     from threadpoolctl import threadpool_limits
 
     from minippo.evaluate import evaluate
@@ -125,8 +116,8 @@ def minippo_run(config_dict: dict, name: str = "", board=None, resume: dict | No
 
 
 def sb3_model(config: Config):
-    """Stable-Baselines3's PPO and its VecNormalize environment, made from ``sb3_settings(config)`` (one torch
-    thread); the speed race uses it too."""
+    """SB3's PPO and its VecNormalize environment from ``sb3_settings(config)``, one torch thread (the speed race's
+    too)."""
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_util import make_vec_env
@@ -145,8 +136,7 @@ def sb3_model(config: Config):
 
 
 def sb3_run(config_dict: dict, name: str = "", board=None) -> dict:
-    """Stable-Baselines3 PPO with ``sb3_settings(config)``, one torch thread, then the same deterministic evaluation
-    as minippo's. Its progress.csv has minippo's columns where SB3 has the number (one row per update)."""
+    """``train_run`` for SB3 PPO, then the same evaluation as minippo's; progress.csv in minippo's columns."""
     import numpy as np
     from stable_baselines3.common.callbacks import BaseCallback
     from threadpoolctl import threadpool_limits
@@ -204,9 +194,8 @@ def sb3_run(config_dict: dict, name: str = "", board=None) -> dict:
 
 
 def sb3_evaluate(model, venv, env_id: str, episodes: int, seed: int) -> list[float]:
-    """minippo's evaluation for an SB3 model: ``episodes`` episodes reset with seeds seed, seed + 1, ..., the mean
-    action (clipped to the bounds by ``predict``), observations normalised with the training statistics frozen
-    (``training=False``), original rewards summed (``norm_reward=False``)."""
+    """minippo's evaluation for an SB3 model: episodes reset with seeds seed, seed + 1, ..., the mean action (clipped
+    by ``predict``), observations normalised with frozen statistics, original rewards summed."""
     import gymnasium as gym
     import numpy as np
 
@@ -227,19 +216,15 @@ def sb3_evaluate(model, venv, env_id: str, episodes: int, seed: int) -> list[flo
 
 
 def peer_run(config_dict: dict, name: str = "", board=None, resume: dict | None = None) -> dict:
-    """The sweep engine's task for both libraries: the run's name says which (``sb3-…`` or ``minippo-…``). Only
-    minippo's runs keep checkpoints, so only they are ever handed ``resume``."""
+    """The engine's task for both libraries, by the run's name; only minippo's runs keep checkpoints to resume."""
     if name.startswith("sb3-"):
         return sb3_run(config_dict, name, board)
     return minippo_run(config_dict, name, board, resume)
 
 
-# the sweep
-
-
 @dataclass
 class PeerRun(Run):
-    """A run of either library; its command is this runner's, for that one run."""
+    """A run of either library; its command is this runner's for that one run."""
 
     def command(self, out_dir) -> str:
         labels, config = self.labels, self.config
@@ -252,19 +237,17 @@ class PeerRun(Run):
 
 def sweep_runs(tasks, seeds, steps, libraries=LIBRARIES) -> list[PeerRun]:
     """Task by task, seed by seed, the libraries side by side (a campaign stopped halfway compares like with like)."""
-    runs = []
-    for env_id in tasks:
-        for seed in seeds:
-            for library in libraries:
-                config = Config(env_id=env_id, total_steps=steps, seed=seed)
-                labels = {"library": library, "task": env_id, "seed": seed}
-                runs.append(PeerRun(f"{library}-{env_id}-seed{seed}", config, labels))
-    return runs
+    config = {(t, s): Config(env_id=t, total_steps=steps, seed=s) for t in tasks for s in seeds}
+    labels = [{"library": name, "task": t, "seed": s} for t in tasks for s in seeds for name in libraries]
+    return [
+        PeerRun(f"{row['library']}-{row['task']}-seed{row['seed']}", config[row["task"], row["seed"]], row)
+        for row in labels
+    ]
 
 
 class PeerSweep(Sweep):
-    """minippo sweep's engine with ``peer_run`` as its task, and each finished run also recorded in peers.csv (the
-    row needs the task's evaluation and library version, which the engine's own sweep row does not carry)."""
+    """The engine with ``peer_run`` as its task, each finished run also recorded in peers.csv (with the evaluation and
+    the version, which the engine's sweep.csv lacks)."""
 
     task = staticmethod(peer_run)
 
@@ -299,18 +282,16 @@ def check_tasks(tasks) -> None:
     for env_id in tasks:
         if env_id not in gym.registry:
             common.fail(f"unknown task '{env_id}'")
-        env = gym.make(env_id, disable_env_checker=True)
-        continuous = isinstance(env.action_space, gym.spaces.Box)
-        env.close()
+        with gym.make(env_id, disable_env_checker=True) as env:
+            continuous = isinstance(env.action_space, gym.spaces.Box)
         if not continuous:
             common.fail(f"{env_id} has discrete actions; this comparison is set up for continuous control")
 
 
 def evaluate_record(runs_csv, runs_root, record_csv, tasks=TASKS) -> int:
-    """minippo's side of the comparison from runs another record made with the same command (the seven tasks'
-    campaign): each run of ``tasks`` in ``runs_csv`` gets minippo's deterministic evaluation of its final policy
-    (``runs_root/<task>-seed<S>/policy.npz``, as ``minippo eval RUN --episodes 10 --seed 0``) and one row in
-    ``record_csv`` with the run's own command and commit. Returns how many rows were added."""
+    """minippo's side from another record's runs of the same command (the seven tasks'): each run of ``tasks`` in
+    ``runs_csv`` not yet in ``record_csv`` gets the evaluation of its ``runs_root/<task>-seed<S>/policy.npz`` and a
+    row with its own command and commit. Returns how many rows were added."""
     from minippo.evaluate import evaluate
 
     done = {(row["task"], row["seed"]) for row in read_rows(record_csv)}

@@ -1,12 +1,10 @@
 """Table 1 of the paper, scored as the paper scores it: which surrogate objective works best.
 
-    python -m benchmarks.table1            # random baselines, then every (setting, task, seed) not yet recorded, then
-                                           # the scores in benchmarks/results/table1.csv
+    python -m benchmarks.table1            # random baselines, every run not yet recorded, then results/table1.csv
     python -m benchmarks.table1 --score    # only recompute table1.csv from the records
     python -m benchmarks.table1 --random --envs MinAtar/Breakout-v1    # only the random policy's returns
 
-By default at a reduced scale: 11 settings × 3 tasks × 3 seeds × 250,000 steps (benchmarks/README.md says exactly
-what was reduced), each run a ``minippo train`` of the setting's options; recorded runs are skipped.
+By default 11 settings × 3 tasks × 3 seeds × 250,000 steps (benchmarks/README.md says what was reduced).
 """
 
 from __future__ import annotations
@@ -16,7 +14,7 @@ import argparse
 from benchmarks import common, scoring
 from minippo.records import append_row, read_rows
 
-# (name, objective, Config overrides, the paper's score): the rows of Table 1, as ``minippo train`` options
+# (name, objective, Config overrides): the rows of Table 1, in its order, as ``minippo train`` options
 SETTINGS = [
     ("No clipping or penalty", "cpi", []),
     ("Clipping, ε = 0.1", "clip", ["clip_epsilon=0.1"]),
@@ -30,7 +28,6 @@ SETTINGS = [
     ("Fixed KL, β = 3", "klpen", ["adaptive_kl=false", "kl_beta=3"]),
     ("Fixed KL, β = 10", "klpen", ["adaptive_kl=false", "kl_beta=10"]),
 ]
-SETTINGS = [(*setting, scoring.TABLE1_PAPER[setting[0]]) for setting in SETTINGS]
 TASKS = ["HalfCheetah-v5", "Hopper-v5", "InvertedDoublePendulum-v5"]
 SEEDS = [1, 2, 3]
 STEPS = 250_000
@@ -50,13 +47,13 @@ def slug(setting: str) -> str:
 
 def with_overrides(setting: tuple, overrides: list[str]) -> tuple:
     """A row of SETTINGS with more ``--config`` overrides (KEY=VALUE) for its training."""
-    name, objective, own, paper = setting
-    return name, objective, [*own, *overrides], paper
+    name, objective, own = setting
+    return name, objective, [*own, *overrides]
 
 
 def options(setting: tuple) -> list[str]:
     """A setting as ``minippo train`` options: ['--objective', 'klpen', '--config', 'adaptive_kl=false', ...]."""
-    _, objective, overrides, _ = setting
+    _, objective, overrides = setting
     return ["--objective", objective, *(["--config", *overrides] if overrides else [])]
 
 
@@ -110,12 +107,18 @@ def sweep_runs(settings, envs, seeds, steps) -> list:
     runs = []
     for env_id in envs:
         for seed in seeds:
-            for setting in settings:
-                name, objective, overrides, _ = setting
+            for name, objective, overrides in settings:
                 config = Config(env_id=env_id, total_steps=steps, seed=seed, objective=objective)
                 labels = {"setting": name, "env": env_id, "seed": seed}
                 run_name = f"{slug(name)}-{env_id}-seed{seed}"
-                runs.append(Run(run_name, config.with_overrides(overrides).validate(), labels, options(setting)))
+                runs.append(
+                    Run(
+                        run_name,
+                        config.with_overrides(overrides).validate(),
+                        labels,
+                        options((name, objective, overrides)),
+                    )
+                )
     return runs
 
 
