@@ -10,6 +10,7 @@ By default 11 settings × 3 tasks × 3 seeds × 250,000 steps (benchmarks/README
 from __future__ import annotations
 
 import argparse
+import itertools
 
 from benchmarks import common, scoring
 from minippo.records import append_row, read_rows
@@ -36,6 +37,7 @@ RUNS_CSV = common.RESULTS / "table1_runs.csv"
 TABLE_CSV = common.RESULTS / "table1.csv"
 RANDOM_FIELDS = ["env", "episodes", "seed", "return_mean", "return_std", "length_mean", "commit", "command"]
 RUN_ROOT = common.RUNS / "table1"
+RANDOM_CSV = common.RESULTS / "random.csv"
 
 
 def slug(setting: str) -> str:
@@ -105,20 +107,11 @@ def sweep_runs(settings, envs, seeds, steps) -> list:
     from minippo.sweep import Run
 
     runs = []
-    for env_id in envs:
-        for seed in seeds:
-            for name, objective, overrides in settings:
-                config = Config(env_id=env_id, total_steps=steps, seed=seed, objective=objective)
-                labels = {"setting": name, "env": env_id, "seed": seed}
-                run_name = f"{slug(name)}-{env_id}-seed{seed}"
-                runs.append(
-                    Run(
-                        run_name,
-                        config.with_overrides(overrides).validate(),
-                        labels,
-                        options((name, objective, overrides)),
-                    )
-                )
+    for env_id, seed, setting in itertools.product(envs, seeds, settings):
+        name, objective, overrides = setting
+        config = Config(env_id=env_id, total_steps=steps, seed=seed, objective=objective).with_overrides(overrides)
+        labels = {"setting": name, "env": env_id, "seed": seed}
+        runs.append(Run(f"{slug(name)}-{env_id}-seed{seed}", config.validate(), labels, options(setting)))
     return runs
 
 
@@ -135,7 +128,6 @@ def main(argv=None) -> int:
     parser.add_argument("--score", action="store_true", help="only rewrite table1.csv from the recorded runs")
     parser.add_argument("--runs-csv", default=str(RUNS_CSV))
     parser.add_argument("--random", action="store_true", help="only record the random policy's returns on --envs")
-    parser.add_argument("--random-csv", default=str(common.RESULTS / "random.csv"))
     parser.add_argument("--table-csv", default=str(TABLE_CSV))
     parser.add_argument("--runs", default=str(RUN_ROOT), help="the folder of run folders")
     common.add_sweep_options(parser)
@@ -149,7 +141,7 @@ def main(argv=None) -> int:
         return common.show_list(sweep_runs(settings, args.envs, args.seeds, args.steps), args.runs_csv, RUN_FIELDS)
     code = 0  # 1 when a training failed (it is logged in the runs folder's sweep.csv)
     if args.random or not args.score:
-        random_policy(args.envs, args.random_csv)  # the 0 of each task's scale, once
+        random_policy(args.envs, RANDOM_CSV)  # the 0 of each task's scale, once
     if args.random:
         return 0
     if not args.score:
@@ -157,7 +149,7 @@ def main(argv=None) -> int:
         code = common.run_sweep(runs, args.runs, args.runs_csv, RUN_FIELDS, args)
         if code == 130:  # interrupted: the table waits for the next run of the command
             return code
-    table = write_table(args.runs_csv, args.random_csv, args.table_csv, args.envs, args.seeds, args.steps)
+    table = write_table(args.runs_csv, RANDOM_CSV, args.table_csv, args.envs, args.seeds, args.steps)
     for row in table:
         print(f"{row['setting']:<30} {row['score']:>6.2f}   paper {row['paper_score']:>5.2f}   ({row['runs']} runs)")
     return code
