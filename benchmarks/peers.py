@@ -40,49 +40,27 @@ RUN_ROOT = common.RUNS / "peers"
 def sb3_settings(config: Config) -> dict:
     """The arguments of ``stable_baselines3.PPO`` and ``VecNormalize`` that make SB3 train as minippo does with
     ``config``, as JSON (``sb3_model`` makes the torch objects); comments say where SB3 cannot do as minippo does."""
-    batch = config.num_envs * config.horizon
-    return {
-        "ppo": {
-            "n_steps": config.horizon,
-            "batch_size": config.minibatch_size,
-            "n_epochs": config.epochs,
-            # minippo's update k (1-based) of K steps at lr·(1 − (k − 1)/K). SB3 calls the schedule with the
-            # progress remaining after update k's rollout, 1 − k/K, so lr·(p + 1/K) gives the same step size.
-            "learning_rate": {"initial": config.lr, "anneal": config.anneal_lr, "plus": 1 / config.num_updates},
-            "gamma": config.gamma,
-            "gae_lambda": config.gae_lambda,
-            "clip_range": config.clip_epsilon,
-            # SB3 can clip the value only by replacing it (no max with the unclipped loss, as minippo's): left off
-            "clip_range_vf": None,
-            "normalize_advantage": config.normalize_advantages,
-            "ent_coef": config.entropy_coef,
-            # minippo's value loss is ½·mean((V − V^targ)²), SB3's mean((V − V^targ)²): half the coefficient is the
-            # same loss, hence the same gradient and the same global-norm clip
-            "vf_coef": config.value_coef / 2,
-            "max_grad_norm": config.max_grad_norm if config.grad_norm_clipping else float("inf"),
-            "target_kl": config.target_kl,  # None in both (the paper has no early stop); SB3's rule would differ
-            "policy_kwargs": {
-                "net_arch": {"pi": list(config.hidden_sizes), "vf": list(config.hidden_sizes)},
-                "activation_fn": "tanh",
-                "share_features_extractor": True,  # a flatten: no parameters to share; the two MLPs are separate
-                "ortho_init": config.orthogonal_init,  # gains √2 hidden, 0.01 policy output, 1 value output
-                "log_std_init": config.log_std_init,
-                "optimizer_kwargs": {"eps": config.adam_eps},
-            },
-            "device": "cpu",
-            "seed": config.seed,
-        },
-        "vec_normalize": {
-            "norm_obs": config.normalize_observations,
-            "norm_reward": config.scale_rewards,
-            "clip_obs": config.obs_clip,
-            "clip_reward": config.reward_clip,
-            "gamma": config.gamma,
-            "epsilon": 1e-8,
-        },
-        "total_timesteps": config.num_updates * batch,
-        "n_envs": config.num_envs,
-    }
+    ppo = dict(n_steps=config.horizon, batch_size=config.minibatch_size, n_epochs=config.epochs)
+    # minippo's update k (1-based) of K steps at lr·(1 − (k − 1)/K). SB3 calls the schedule with the progress
+    # remaining after update k's rollout, 1 − k/K, so lr·(p + 1/K) gives the same step size.
+    ppo["learning_rate"] = {"initial": config.lr, "anneal": config.anneal_lr, "plus": 1 / config.num_updates}
+    ppo |= dict(gamma=config.gamma, gae_lambda=config.gae_lambda, clip_range=config.clip_epsilon)
+    # SB3 can clip the value only by replacing it (no max with the unclipped loss, as minippo's): left off
+    ppo |= dict(clip_range_vf=None, normalize_advantage=config.normalize_advantages, ent_coef=config.entropy_coef)
+    # minippo's value loss is ½·mean((V − V^targ)²), SB3's mean((V − V^targ)²): half the coefficient is the same
+    # loss, hence the same gradient and the same global-norm clip
+    ppo["vf_coef"] = config.value_coef / 2
+    ppo["max_grad_norm"] = config.max_grad_norm if config.grad_norm_clipping else float("inf")
+    ppo["target_kl"] = config.target_kl  # None in both (the paper has no early stop); SB3's rule would differ
+    net = dict(net_arch={"pi": list(config.hidden_sizes), "vf": list(config.hidden_sizes)}, activation_fn="tanh")
+    net["share_features_extractor"] = True  # a flatten: no parameters to share; the two MLPs are separate
+    net["ortho_init"] = config.orthogonal_init  # gains √2 hidden, 0.01 policy output, 1 value output
+    net |= dict(log_std_init=config.log_std_init, optimizer_kwargs={"eps": config.adam_eps})
+    ppo |= dict(policy_kwargs=net, device="cpu", seed=config.seed)
+    normalize = dict(norm_obs=config.normalize_observations, norm_reward=config.scale_rewards, clip_obs=config.obs_clip)
+    normalize |= dict(clip_reward=config.reward_clip, gamma=config.gamma, epsilon=1e-8)
+    steps = config.num_updates * config.num_envs * config.horizon
+    return {"ppo": ppo, "vec_normalize": normalize, "total_timesteps": steps, "n_envs": config.num_envs}
 
 
 def version(library: str) -> str:

@@ -2,9 +2,8 @@
 
     python -m benchmarks.report             # score the records, then write summary.md, the figures and the README block
 
-summary.md is benchmarks/summary_template.md, paragraphs written once by a person that say what each table holds and
-how it was made (never what its numbers are), with each ``<!-- table:NAME -->`` replaced by the table NAME that
-benchmarks/scoring.py computes.
+summary.md is benchmarks/summary_template.md (a person's paragraphs on what each table holds and how it was made)
+with each ``<!-- table:NAME -->`` replaced by the table NAME that benchmarks/scoring.py computes.
 """
 
 from __future__ import annotations
@@ -112,10 +111,7 @@ def summary_text(tables: dict[str, list[dict]]) -> str:
 def readme_blocks(tables: dict[str, list[dict]], speed: list[dict]) -> dict[str, str]:
     seven = [row for row in tables["seven_tasks"] if row["record"] == "seven_tasks_runs.csv"]
     columns = {k: SEVEN[k] for k in ("Task", "minippo, mean ± sd", "paper (Fig. 3, ≈)", "CleanRL (v4)")}
-    return {
-        "mujoco": scoring.markdown(seven, columns),
-        "speed": scoring.markdown(speed, {k: SPEED[k] for k in list(SPEED)[:4]}),
-    }
+    return {"mujoco": scoring.markdown(seven, columns), "speed": scoring.markdown(speed, dict(list(SPEED.items())[:4]))}
 
 
 def fill_readme(text: str, blocks: dict[str, str]) -> str:

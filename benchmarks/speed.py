@@ -1,14 +1,13 @@
-"""The speed race on one machine, in one process: raw environment stepping, minippo, and Stable-Baselines3 PPO; or,
-with --sweep, what ``minippo sweep`` saves: a small grid trained one run after the other, then on the sweep engine.
+"""The speed race in one process: raw environment stepping, minippo and Stable-Baselines3 PPO; or, with --sweep,
+a small grid trained one run after the other, then on minippo sweep's engine.
 
     python -m benchmarks.speed                            # Hopper-v5, 5 interleaved rounds -> results/speed.csv
     python -m benchmarks.speed --env MinAtar/Breakout-v1  # the paper's Atari settings -> results/speed_minatar.csv
     python -m benchmarks.speed --sweep --steps 204800     # 4 Hopper runs, alone and on 2 workers -> sweep_speed.csv
 
-The race interleaves its rounds (raw random stepping, ``--updates`` updates of minippo's ``Trainer``, SB3 PPO with the
-settings ``peers.sb3_model`` translates, one torch thread) so that a change in the machine's load hits all three, and
-reports the medians. The sweep mode checks that every run's progress.csv is the same on both sides apart from the
-clock columns. Run either while no training is running: the 1-minute load average goes in the CSV.
+The race interleaves its rounds (20,000 random steps, ``--updates`` updates of minippo's ``Trainer`` and of SB3 PPO
+with the peers' settings) so that a change in the machine's load hits all three, and reports the medians. --sweep
+checks that every progress.csv is the same on both sides but for the clock. The load average goes in the CSV.
 """
 
 from __future__ import annotations
@@ -29,6 +28,7 @@ FIELDS = "env contender steps_per_s rounds steps_per_round vs_raw vs_sb3 version
 FIELDS = [*FIELDS.split(), "commit", "command"]
 SWEEP_FIELDS = "env grid runs steps workers cpus sequential_s sweep_s speedup sequential_train_s sweep_train_s"
 SWEEP_FIELDS = [*SWEEP_FIELDS.split(), "same_progress", "load_before", "load_after", "commit", "command"]
+RAW_STEPS = 20_000  # random steps a round
 
 
 def minatar(env_id: str) -> bool:
@@ -110,8 +110,8 @@ def summarize(env_id: str, rounds: dict[str, list[float]], steps: dict[str, int]
 
 
 def sweep_race(args, argv) -> int:
-    """Each run's ``minippo train`` command in this process, one after the other, then ``minippo sweep`` with the same
-    runs (timed from the start of Ray to its stop); one row appended to the record."""
+    """Each run's ``minippo train`` in this process, one after the other, then ``minippo sweep`` of the same runs
+    (timed from Ray's start to its stop); one row appended to the record."""
     import shlex
     import tempfile
     from pathlib import Path
@@ -165,7 +165,6 @@ def main(argv=None) -> int:
     parser.add_argument("--env", default="Hopper-v5", help="a MuJoCo task, or a MinAtar game (MinAtar/<Game>-v1)")
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--updates", type=int, help="timed updates per round for each trainer (3; 5 on MinAtar)")
-    parser.add_argument("--raw-steps", type=int, default=20_000, help="random steps per round for raw stepping")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--no-sb3", action="store_true", help="leave Stable-Baselines3 out even if installed")
     parser.add_argument("--csv", help="the record (speed.csv, speed_minatar.csv on MinAtar, sweep_speed.csv --sweep)")
@@ -180,8 +179,8 @@ def main(argv=None) -> int:
     if args.sweep:
         return sweep_race(args, argv)
     args.updates = (5 if minatar(args.env) else 3) if args.updates is None else args.updates
-    if args.rounds < 1 or args.updates < 1 or args.raw_steps < 1:
-        common.fail("--rounds, --updates and --raw-steps must be positive")
+    if args.rounds < 1 or args.updates < 1:
+        common.fail("--rounds and --updates must be positive")
     import importlib.util
 
     import gymnasium as gym
@@ -207,9 +206,9 @@ def main(argv=None) -> int:
         more = lambda n: model.learn(total_timesteps=n * batch, reset_num_timesteps=False)  # noqa: E731
         contenders["sb3"] = (lambda: model.num_timesteps, more)
     rounds: dict[str, list[float]] = {name: [] for name in ("raw", "minippo", "sb3")}
-    steps: dict[str, int] = {"raw": args.raw_steps}
+    steps: dict[str, int] = {"raw": RAW_STEPS}
     for number in range(1, args.rounds + 1):
-        rounds["raw"].append(raw_stepping(args.env, args.raw_steps, args.seed + number))
+        rounds["raw"].append(raw_stepping(args.env, RAW_STEPS, args.seed + number))
         for name, (done, advance) in contenders.items():
             before, started = done(), time.perf_counter()
             advance(args.updates)
