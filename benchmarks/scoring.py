@@ -46,9 +46,9 @@ def normalized_scores(runs: list[dict], random_return: dict[str, float]) -> dict
     """Table 1's scoring: per task the random policy's return is 0 and the best run of any setting is 1; a setting's
     score is the mean of its runs' normalised returns, ``se`` √(Σ_k s_k²/n_k) / K over its K tasks (None when a task
     has one seed). Returns {setting: {"score", "se", "runs", "tasks", "per_task"}}."""
-    best: dict[str, float] = {}
-    for run in runs:
-        best[run["env"]] = max(best.get(run["env"], -math.inf), float(run["return_mean"]))
+    best = {
+        env_id: max(float(r["return_mean"]) for r in runs if r["env"] == env_id) for env_id in {r["env"] for r in runs}
+    }
     per_task = defaultdict(lambda: defaultdict(list))
     for run in runs:
         env_id = run["env"]
@@ -64,13 +64,8 @@ def normalized_scores(runs: list[dict], random_return: dict[str, float]) -> dict
         se = None
         if all(len(task) > 1 for task in tasks.values()):
             se = math.sqrt(sum(statistics.variance(task) / len(task) for task in tasks.values())) / len(tasks)
-        scores[setting] = {
-            "score": statistics.fmean(values),
-            "se": se,
-            "runs": len(values),
-            "tasks": len(tasks),
-            "per_task": {env_id: statistics.fmean(task) for env_id, task in tasks.items()},
-        }
+        scores[setting] = {"score": statistics.fmean(values), "se": se, "runs": len(values), "tasks": len(tasks)}
+        scores[setting]["per_task"] = {env_id: statistics.fmean(task) for env_id, task in tasks.items()}
     return scores
 
 
