@@ -1,6 +1,5 @@
-"""What the runners share: the repository's paths, a one-line error, one CSV writer, the progress.csv rounding of
-committed runs, and running a list of ``minippo.sweep.Run`` on minippo sweep's engine into a record of the runner's
-own columns (what is recorded and what is left, ``--list``, resuming)."""
+"""What the runners share: paths, one-line errors, a CSV writer, the rounding of committed progress.csv files, and
+running ``minippo.sweep.Run``s on minippo sweep's engine into a record of the runner's columns (--list, resuming)."""
 
 from __future__ import annotations
 
@@ -122,17 +121,14 @@ def show_list(runs, record_csv, fields) -> int:
     for name, texts in zip(named, shown):
         row = recorded.get(name, {})
         label = "  ".join(f"{text:<{width}}" for text, width in zip(texts, widths))
-        scores = "".join(
-            f"  {column[:-5]} {row[column]:>9}" for column in ("return_mean", "eval_mean") if column in row
-        )
+        scores = "".join(f"  {col[:-5]} {row[col]:>9}" for col in ("return_mean", "eval_mean") if col in row)
         print(f"{'recorded' if row else 'to do':<8}  {label}{scores}")
     return 0
 
 
 def record_sweep(runs, root, record_csv, fields: list[str], more=None) -> int:
-    """Copy the ok rows of ``root/sweep.csv`` that ``record_csv`` lacks into it (their labels, then steps, return,
-    clock, commit and command, and ``more(folder)``'s columns), rounding each run's progress.csv; returns how many
-    were added."""
+    """Copy the ok rows of ``root/sweep.csv`` that ``record_csv`` lacks into it, with ``more(folder)``'s columns,
+    rounding each run's progress.csv; returns how many were added."""
     key, named, recorded = keyed(runs, record_csv, fields)
     left = {name: run for name, run in named.items() if name not in recorded}
     added = 0
@@ -151,11 +147,9 @@ def record_sweep(runs, root, record_csv, fields: list[str], more=None) -> int:
 
 
 def run_sweep(runs, root, record_csv, fields: list[str], args, engine=None, more=None) -> int:
-    """Run the ``runs`` that ``record_csv`` does not hold on minippo sweep's engine into the folder ``root`` (each
-    run, failed ones too, is logged in ``root/sweep.csv`` with the node it ran on), then record the finished ones
-    (``more``: see ``record_sweep``); with ``args.list``, only show what is recorded and what is left. ``engine``: a
-    ``minippo.sweep.Sweep`` maker whose ``finish`` writes the record itself. Returns the exit code (runners'
-    ``main``s wear ``one_line_errors``)."""
+    """Run the ``runs`` that ``record_csv`` lacks on minippo sweep's engine into ``root`` (which logs every run in
+    ``root/sweep.csv``), then record the finished ones (``more``: see ``record_sweep``), or with ``args.list`` show
+    them. ``engine``: a ``Sweep`` maker whose ``finish`` writes the record itself. Returns the exit code."""
     from minippo.sweep import Sweep
 
     if args.list:

@@ -103,14 +103,11 @@ def sb3_model(config: Config):
 
     torch.set_num_threads(1)
     settings = sb3_settings(config)
-    kwargs = dict(settings["ppo"])
-    rate = kwargs["learning_rate"]
-    kwargs["learning_rate"] = (
-        (lambda left: rate["initial"] * (left + rate["plus"])) if rate["anneal"] else rate["initial"]
-    )
-    kwargs["policy_kwargs"] = {**kwargs["policy_kwargs"], "activation_fn": torch.nn.Tanh}
+    rate = settings["ppo"]["learning_rate"]
+    schedule = (lambda left: rate["initial"] * (left + rate["plus"])) if rate["anneal"] else rate["initial"]
+    net = {**settings["ppo"]["policy_kwargs"], "activation_fn": torch.nn.Tanh}
     env = VecNormalize(make_vec_env(config.env_id, settings["n_envs"], config.seed), **settings["vec_normalize"])
-    return PPO("MlpPolicy", env, verbose=0, **kwargs), env
+    return PPO("MlpPolicy", env, verbose=0, **settings["ppo"] | {"learning_rate": schedule, "policy_kwargs": net}), env
 
 
 def sb3_run(config_dict: dict, name: str = "", board=None) -> dict:
@@ -254,18 +251,6 @@ def code_commit() -> str:
     return common.git_commit(("minippo", "benchmarks/peers.py"))
 
 
-def check_tasks(tasks) -> None:
-    import gymnasium as gym
-
-    for env_id in tasks:
-        if env_id not in gym.registry:
-            common.fail(f"unknown task '{env_id}'")
-        with gym.make(env_id, disable_env_checker=True) as env:
-            continuous = isinstance(env.action_space, gym.spaces.Box)
-        if not continuous:
-            common.fail(f"{env_id} has discrete actions; this comparison is set up for continuous control")
-
-
 def evaluate_record(runs_csv, runs_root, record_csv, tasks=TASKS) -> int:
     """minippo's side from another record's runs of the same command (the seven tasks'): each run of ``tasks`` in
     ``runs_csv`` not yet in ``record_csv`` gets the evaluation of its ``runs_root/<task>-seed<S>/policy.npz`` and a
@@ -310,7 +295,14 @@ def main(argv=None) -> int:
     runs = sweep_runs(args.tasks, args.seeds, args.steps, [name for name in LIBRARIES if name in args.libraries])
     if args.list:
         return common.show_list(runs, args.csv, FIELDS)
-    check_tasks(args.tasks)
+    import gymnasium as gym
+
+    for env_id in args.tasks:
+        if env_id not in gym.registry:
+            common.fail(f"unknown task '{env_id}'")
+        with gym.make(env_id, disable_env_checker=True) as env:
+            if not isinstance(env.action_space, gym.spaces.Box):
+                common.fail(f"{env_id} has discrete actions; this comparison is set up for continuous control")
     if "sb3" in args.libraries and importlib.util.find_spec("stable_baselines3") is None:
         install = 'pip install torch==2.13.0 (the CPU wheel) and then pip install -e ".[bench]"'
         common.fail(f"Stable-Baselines3 is not installed: {install}")

@@ -1,5 +1,5 @@
 """Records in, tables out: every number that summary.md, the README and chapter 11 show, computed from the records
-in benchmarks/results/ and written under benchmarks/results/tables/ (``python -m benchmarks.scoring``). No sentences.
+in benchmarks/results/ and written under benchmarks/results/tables/ (by ``python -m benchmarks.report``). No sentences.
 """
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import statistics
 from collections import defaultdict
 from pathlib import Path
 
-from benchmarks.common import RESULTS, BenchmarkError, relative, write_rows
+from benchmarks.common import RESULTS, BenchmarkError, write_rows
 from minippo.records import read_rows
 
 TABLES = RESULTS / "tables"
@@ -195,15 +195,15 @@ def one_detail(records: dict[str, list[dict]]) -> list[dict]:
 def same_math(rows: list[dict]) -> list[dict]:
     """Per comparison of two commits: the largest relative difference at update 1, and the first update where they
     part by more than 1% (empty if never)."""
-    groups = defaultdict(list)
+    groups, names = defaultdict(list), ("env", "seed", "dtype", "earlier_commit", "commit")
     for row in rows:
-        groups[(row["env"], row["seed"], row["dtype"], row["earlier_commit"], row["commit"])].append(row)
+        groups[tuple(row[k] for k in names)].append(row)
     table = []
-    for (env_id, seed, dtype, earlier, commit), runs in groups.items():
+    for key, runs in groups.items():
         runs.sort(key=lambda row: int(row["update"]))
         parted = [int(r["update"]) for r in runs if float(r["max_relative_difference"]) > 0.01]
-        row = {"env": env_id, "seed": seed, "dtype": dtype, "earlier_commit": earlier, "commit": commit}
-        row |= {"updates": len(runs), "difference_at_update_1": runs[0]["max_relative_difference"]}
+        first = runs[0]["max_relative_difference"]
+        row = dict(zip(names, key)) | {"updates": len(runs), "difference_at_update_1": first}
         table.append(row | {"parted_at_update": parted[0] if parted else "", "command": runs[0]["command"]})
     return table
 
@@ -247,8 +247,3 @@ def score_all(results=RESULTS, folder=TABLES) -> dict[str, list[dict]]:
         if rows:
             write_rows(Path(folder) / f"{name}.csv", rows)
     return tables
-
-
-if __name__ == "__main__":
-    for name, rows in score_all().items():
-        print(f"{relative(TABLES / (name + '.csv'))}: {len(rows)} rows")

@@ -35,16 +35,6 @@ def minatar(env_id: str) -> bool:
     return env_id.startswith("MinAtar/")
 
 
-def race_config(env_id: str, seed: int):
-    """The paper's MuJoCo settings (Config's defaults), or its Atari settings on a MinAtar game."""
-    from minippo.ppo import Config
-    from minippo.presets import ATARI
-
-    if minatar(env_id):
-        return Config(env_id=env_id, seed=seed, total_steps=10_000_000, **ATARI).validate()
-    return Config(env_id=env_id, seed=seed, total_steps=1_000_000)
-
-
 def raw_stepping(env_id: str, steps: int, seed: int) -> float:
     """Steps per second of random actions in the bare environment."""
     import gymnasium as gym
@@ -187,10 +177,17 @@ def main(argv=None) -> int:
 
     from benchmarks.peers import sb3_model, version
     from minippo.envs import check_env_id
-    from minippo.ppo import Trainer
+    from minippo.ppo import Config, Trainer
+    from minippo.presets import ATARI
 
     check_env_id(args.env)  # registers the MinAtar games when asked for one
-    load_before, config = os.getloadavg()[0], race_config(args.env, args.seed)
+    load_before = os.getloadavg()[0]
+    # the paper's MuJoCo settings (Config's defaults), or its Atari settings on a MinAtar game
+    atari = minatar(args.env)
+    config = Config(
+        args.env, total_steps=10_000_000 if atari else 1_000_000, seed=args.seed, **(ATARI if atari else {})
+    )
+    config = config.validate()
     versions = {"raw": f"gymnasium {gym.__version__}", "minippo": version("minippo")}
     trainer = Trainer(config)  # each trainer after a warm-up update: first touches of memory, caches, lazy imports
     trainer.run_update()
