@@ -82,18 +82,17 @@ def random_policy(envs, random_csv) -> None:
     for env_id in envs:
         check_env_id(env_id)  # registers the MinAtar games when asked for one
     for env_id in [env_id for env_id in envs if env_id not in recorded]:
-        env = gym.make(env_id)
-        env.action_space.seed(seed)
-        returns, lengths = [], []
-        for episode in range(episodes):
-            env.reset(seed=seed + episode)
-            total, length, done = 0.0, 0, False
-            while not done:
-                _, reward, terminated, truncated, _ = env.step(env.action_space.sample())
-                total, length, done = total + float(reward), length + 1, terminated or truncated
-            returns.append(total)
-            lengths.append(length)
-        env.close()
+        played = []  # (return, length) of each episode
+        with gym.make(env_id) as env:
+            env.action_space.seed(seed)
+            for episode in range(episodes):
+                env.reset(seed=seed + episode)
+                total, length, done = 0.0, 0, False
+                while not done:
+                    _, reward, terminated, truncated, _ = env.step(env.action_space.sample())
+                    total, length, done = total + float(reward), length + 1, terminated or truncated
+                played.append((total, length))
+        returns, lengths = np.array(played).T
         row = {"env": env_id, "episodes": episodes, "seed": seed, "return_mean": round(float(np.mean(returns)), 3)}
         row |= {"return_std": round(float(np.std(returns)), 3), "length_mean": round(float(np.mean(lengths)), 1)}
         row |= {"commit": common.git_commit(), "command": common.invocation("table1", ["--random", "--envs", env_id])}
