@@ -20,8 +20,8 @@ RUNS = ROOT / "benchmarks" / "runs"
 THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
-class BenchmarkError(Exception):
-    """A problem to report on one line (bad arguments, a failed training)."""
+class BenchmarkError(ValueError):
+    """A problem to report on one line (bad arguments or records, a failed training)."""
 
 
 def fail(message: str) -> None:

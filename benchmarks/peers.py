@@ -175,18 +175,16 @@ def sb3_evaluate(model, venv, env_id: str, episodes: int, seed: int) -> list[flo
     import numpy as np
 
     venv.training, venv.norm_reward = False, False
-    env = gym.make(env_id, disable_env_checker=True)
     returns = []
-    for episode in range(episodes):
-        obs, _ = env.reset(seed=seed + episode)
-        total, done = 0.0, False
-        while not done:
-            action, _ = model.predict(venv.normalize_obs(np.asarray(obs, dtype=np.float64)), deterministic=True)
-            obs, reward, terminated, truncated, _ = env.step(action)
-            total += float(reward)
-            done = terminated or truncated
-        returns.append(total)
-    env.close()
+    with gym.make(env_id, disable_env_checker=True) as env:
+        for episode in range(episodes):
+            obs, _ = env.reset(seed=seed + episode)
+            total, done = 0.0, False
+            while not done:
+                action, _ = model.predict(venv.normalize_obs(np.asarray(obs, dtype=np.float64)), deterministic=True)
+                obs, reward, terminated, truncated, _ = env.step(action)
+                total, done = total + float(reward), terminated or truncated
+            returns.append(total)
     return returns
 
 

@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 from benchmarks import scoring
-from benchmarks.common import RESULTS, ROOT, RUNS, fail
+from benchmarks.common import RESULTS, ROOT, RUNS, BenchmarkError, one_line_errors
 from minippo.plotting import INK, ORANGE, SAGE, draw_seed_band, read_progress, seed_curves
 from minippo.records import read_rows
 
@@ -118,11 +118,12 @@ def fill_readme(text: str, blocks: dict[str, str]) -> str:
     for name, block in blocks.items():
         pattern = re.compile(rf"(<!-- summary:{name} -->\n).*?(\n<!-- /summary:{name} -->)", re.S)
         if not pattern.search(text):
-            raise ValueError(f"the README has no <!-- summary:{name} --> block")
+            raise BenchmarkError(f"the README has no <!-- summary:{name} --> block")
         text = pattern.sub(lambda match, block=block: match.group(1) + block + match.group(2), text)
     return text
 
 
+@one_line_errors
 def main(argv=None) -> int:
     import matplotlib
 
@@ -134,10 +135,7 @@ def main(argv=None) -> int:
     figure_peers(peer_rows + read_rows(RESULTS / "peers_minippo.csv"), RESULTS / "peers_curves.png")
     figure_table1(tables["table1_1m"], RESULTS / "table1_1m.png")
     readme = ROOT / "README.md"
-    try:
-        readme.write_text(fill_readme(readme.read_text(), readme_blocks(tables, read_rows(RESULTS / "speed.csv"))))
-    except ValueError as error:
-        fail(str(error))
+    readme.write_text(fill_readme(readme.read_text(), readme_blocks(tables, read_rows(RESULTS / "speed.csv"))))
     print("wrote benchmarks/results/summary.md, its figures and the README's result tables", file=sys.stderr)
     return 0
 

@@ -22,6 +22,7 @@ CLEANRL = {task: (int(r["cleanrl_mean"]), int(r["cleanrl_sd"])) for task, r in P
 TABLE1_PAPER = {row["setting"]: float(row["paper_score"]) for row in read_rows(RESULTS / "published_table1.csv")}
 RANDOM_EPISODES, RANDOM_SEED = 100, 0
 STEPS_1M = 999_424  # 488 updates of 2048 steps
+DETAILS = ["grad_norm_clipping", "clip_value_loss", "scale_rewards"]  # the three the paper does not describe
 
 
 def welch_interval(first: list[float], second: list[float], level: float = 0.95) -> dict:
@@ -171,9 +172,6 @@ def peers(rows: list[dict]) -> list[dict]:
             row["standing"] = interval["standing"]
             table.append(row | {"minippo_minutes": minutes(mine), "sb3_minutes": minutes(theirs)})
     return table
-
-
-DETAILS = ["grad_norm_clipping", "clip_value_loss", "scale_rewards"]
 
 
 def one_detail(records: dict[str, list[dict]]) -> list[dict]:
