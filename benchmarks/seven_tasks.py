@@ -37,16 +37,13 @@ def sweep_runs(envs, seeds, steps) -> list:
 @common.one_line_errors
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--envs", nargs="+", default=TASKS, metavar="ENV")
+    parser.add_argument("--envs", nargs="+", default=TASKS, choices=TASKS, metavar="ENV", help="of the seven tasks")
     parser.add_argument("--seeds", nargs="+", type=int, default=SEEDS)
     parser.add_argument("--steps", type=int, default=STEPS)
     parser.add_argument("--csv", default=str(CSV_PATH), help="where to append the records")
     parser.add_argument("--runs", default=str(RUN_ROOT), help="the folder of run folders")
     common.add_sweep_options(parser)
     args = parser.parse_args(argv)
-    unknown = [env_id for env_id in args.envs if env_id not in TASKS]
-    if unknown:
-        common.fail(f"unknown task {', '.join(unknown)}; the seven are {', '.join(TASKS)}")
     common.check_steps(args.steps)
     runs = sweep_runs(args.envs, args.seeds, args.steps)
     return common.run_sweep(runs, args.runs, args.csv, FIELDS, args)

@@ -31,26 +31,20 @@ SWEEP_FIELDS = [*SWEEP_FIELDS.split(), "same_progress", "load_before", "load_aft
 RAW_STEPS = 20_000  # random steps a round
 
 
-def minatar(env_id: str) -> bool:
-    return env_id.startswith("MinAtar/")
-
-
 def raw_stepping(env_id: str, steps: int, seed: int) -> float:
     """Steps per second of random actions in the bare environment."""
     import gymnasium as gym
 
-    env = gym.make(env_id)
-    env.action_space.seed(seed)
-    env.reset(seed=seed)
-    actions = [env.action_space.sample() for _ in range(steps)]  # sampled before the clock starts
-    started = time.perf_counter()
-    for action in actions:
-        _, _, terminated, truncated, _ = env.step(action)
-        if terminated or truncated:
-            env.reset()
-    elapsed = time.perf_counter() - started
-    env.close()
-    return steps / elapsed
+    with gym.make(env_id) as env:
+        env.action_space.seed(seed)
+        env.reset(seed=seed)
+        actions = [env.action_space.sample() for _ in range(steps)]  # sampled before the clock starts
+        started = time.perf_counter()
+        for action in actions:
+            _, _, terminated, truncated, _ = env.step(action)
+            if terminated or truncated:
+                env.reset()
+        return steps / (time.perf_counter() - started)
 
 
 def sb3_minatar_model(config):
@@ -164,11 +158,12 @@ def main(argv=None) -> int:
     parser.add_argument("--steps", type=int, default=102400, help="--sweep: steps per run")
     parser.add_argument("--workers", type=int, default=2, help="--sweep: the engine's workers")
     args = parser.parse_args(argv)
-    record = "sweep_speed" if args.sweep else "speed_minatar" if minatar(args.env) else "speed"
+    atari = args.env.startswith("MinAtar/")  # the paper's Atari settings, else its MuJoCo ones (Config's defaults)
+    record = "sweep_speed" if args.sweep else "speed_minatar" if atari else "speed"
     args.csv = args.csv or str(common.RESULTS / f"{record}.csv")
     if args.sweep:
         return sweep_race(args, argv)
-    args.updates = (5 if minatar(args.env) else 3) if args.updates is None else args.updates
+    args.updates = (5 if atari else 3) if args.updates is None else args.updates
     if args.rounds < 1 or args.updates < 1:
         common.fail("--rounds and --updates must be positive")
     import importlib.util
@@ -182,8 +177,6 @@ def main(argv=None) -> int:
 
     check_env_id(args.env)  # registers the MinAtar games when asked for one
     load_before = os.getloadavg()[0]
-    # the paper's MuJoCo settings (Config's defaults), or its Atari settings on a MinAtar game
-    atari = minatar(args.env)
     config = Config(
         args.env, total_steps=10_000_000 if atari else 1_000_000, seed=args.seed, **(ATARI if atari else {})
     )
@@ -197,7 +190,7 @@ def main(argv=None) -> int:
         versions["sb3"] = "skipped: " + ("--no-sb3" if args.no_sb3 else "stable-baselines3 is not installed")
     else:
         versions["sb3"] = version("sb3")
-        model = sb3_minatar_model(config) if minatar(args.env) else sb3_model(config)[0]  # the peers' settings
+        model = sb3_minatar_model(config) if atari else sb3_model(config)[0]  # the peers' settings
         batch = model.n_steps * model.n_envs
         model.learn(total_timesteps=batch)
         more = lambda n: model.learn(total_timesteps=n * batch, reset_num_timesteps=False)  # noqa: E731
