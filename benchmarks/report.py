@@ -12,6 +12,9 @@ import re
 import sys
 from pathlib import Path
 
+import numpy as np
+from matplotlib.figure import Figure
+
 from benchmarks import scoring
 from benchmarks.common import RESULTS, ROOT, RUNS, BenchmarkError, one_line_errors
 from minippo.plotting import INK, ORANGE, SAGE, draw_seed_band, read_progress, seed_curves
@@ -46,9 +49,8 @@ def band(ax, folders, colour: str, library: str, **options) -> None:
 
 
 def figure_seven_tasks(rows: list[dict], out: Path, runs_root=RUNS / "seven_tasks") -> None:
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(2, 4, figsize=(13, 5.6), dpi=100)
+    fig = Figure(figsize=(13, 5.6), dpi=100)  # no pyplot: nothing to show, nothing to close
+    axes = fig.subplots(2, 4)
     for ax, task in zip(axes.flat, scoring.SEVEN_TASKS):
         folders = [Path(runs_root) / f"{task}-seed{r['seed']}" for r in rows if r["env"] == task]
         band(ax, folders, ORANGE, "minippo", alpha=0.25)
@@ -61,10 +63,9 @@ def figure_seven_tasks(rows: list[dict], out: Path, runs_root=RUNS / "seven_task
 
 def figure_peers(rows: list[dict], out: Path, runs_root=RUNS / "peers", minippo_root=RUNS / "seven_tasks") -> None:
     """SB3's curves from the side-by-side runs, minippo's from the seven-task runs its side reads."""
-    import matplotlib.pyplot as plt
-
     tasks = list(dict.fromkeys(row["task"] for row in rows))
-    fig, axes = plt.subplots(1, len(tasks), figsize=(4.2 * len(tasks), 3.4), dpi=100, squeeze=False)
+    fig = Figure(figsize=(4.2 * len(tasks), 3.4), dpi=100)
+    axes = fig.subplots(1, len(tasks), squeeze=False)
     for ax, task in zip(axes[0], tasks):
         for library, colour, prefix in (("minippo", ORANGE, f"{minippo_root}/"), ("sb3", SAGE, f"{runs_root}/sb3-")):
             seeds = [r["seed"] for r in rows if r["task"] == task and r["library"] == library]
@@ -75,11 +76,9 @@ def figure_peers(rows: list[dict], out: Path, runs_root=RUNS / "peers", minippo_
 
 
 def figure_table1(table: list[dict], out: Path) -> None:
-    import matplotlib.pyplot as plt
-    import numpy as np
-
     y = np.arange(len(table))
-    fig, ax = plt.subplots(figsize=(7.5, 4.5), dpi=100)
+    fig = Figure(figsize=(7.5, 4.5), dpi=100)
+    ax = fig.subplots()
     ax.barh(y - 0.2, [float(row["score"]) for row in table], 0.4, color=ORANGE, label="minippo")
     ax.barh(y + 0.2, [float(row["paper_score"]) for row in table], 0.4, color=INK, alpha=0.6, label="paper, Table 1")
     ax.set_yticks(y, [row["setting"] for row in table], fontsize=8)
@@ -91,13 +90,10 @@ def figure_table1(table: list[dict], out: Path) -> None:
 
 
 def save(fig, out: Path) -> None:
-    import matplotlib.pyplot as plt
-
     for ax in fig.axes:
         ax.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(out)
-    plt.close(fig)
 
 
 def summary_text(tables: dict[str, list[dict]]) -> str:
@@ -125,9 +121,6 @@ def fill_readme(text: str, blocks: dict[str, str]) -> str:
 
 @one_line_errors
 def main(argv=None) -> int:
-    import matplotlib
-
-    matplotlib.use("Agg")
     tables = scoring.score_all()
     (RESULTS / "summary.md").write_text(summary_text(tables))
     figure_seven_tasks(read_rows(RESULTS / "seven_tasks_runs.csv"), RESULTS / "mujoco_curves.png")
