@@ -16,19 +16,10 @@ from benchmarks import common, scoring
 from minippo.records import append_row, read_rows
 
 # (name, objective, Config overrides): the rows of Table 1, in its order, as ``minippo train`` options
-SETTINGS = [
-    ("No clipping or penalty", "cpi", []),
-    ("Clipping, ε = 0.1", "clip", ["clip_epsilon=0.1"]),
-    ("Clipping, ε = 0.2", "clip", ["clip_epsilon=0.2"]),
-    ("Clipping, ε = 0.3", "clip", ["clip_epsilon=0.3"]),
-    ("Adaptive KL, d_targ = 0.003", "klpen", ["kl_target=0.003"]),
-    ("Adaptive KL, d_targ = 0.01", "klpen", ["kl_target=0.01"]),
-    ("Adaptive KL, d_targ = 0.03", "klpen", ["kl_target=0.03"]),
-    ("Fixed KL, β = 0.3", "klpen", ["adaptive_kl=false", "kl_beta=0.3"]),
-    ("Fixed KL, β = 1", "klpen", ["adaptive_kl=false", "kl_beta=1"]),
-    ("Fixed KL, β = 3", "klpen", ["adaptive_kl=false", "kl_beta=3"]),
-    ("Fixed KL, β = 10", "klpen", ["adaptive_kl=false", "kl_beta=10"]),
-]
+SETTINGS = [("No clipping or penalty", "cpi", [])]
+SETTINGS += [(f"Clipping, ε = {eps}", "clip", [f"clip_epsilon={eps}"]) for eps in ("0.1", "0.2", "0.3")]
+SETTINGS += [(f"Adaptive KL, d_targ = {d}", "klpen", [f"kl_target={d}"]) for d in ("0.003", "0.01", "0.03")]
+SETTINGS += [(f"Fixed KL, β = {b}", "klpen", ["adaptive_kl=false", f"kl_beta={b}"]) for b in ("0.3", "1", "3", "10")]
 TASKS = ["HalfCheetah-v5", "Hopper-v5", "InvertedDoublePendulum-v5"]
 SEEDS = [1, 2, 3]
 STEPS = 250_000
