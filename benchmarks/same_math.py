@@ -39,9 +39,8 @@ def train(code_dir: Path, args, out: Path) -> list[dict]:
     imported is the one in that folder."""
     env = {**os.environ, **common.THREAD_ENV}
     probe = "import minippo, minippo.ppo as p; print(minippo.__file__); print('dtype' in p.Config.__dataclass_fields__)"
-    where, has_dtype = subprocess.run(
-        [sys.executable, "-c", probe], cwd=code_dir, env=env, capture_output=True, text=True
-    ).stdout.split()
+    probed = subprocess.run([sys.executable, "-c", probe], cwd=code_dir, env=env, capture_output=True, text=True)
+    where, has_dtype = probed.stdout.split()
     if not Path(where).resolve().is_relative_to(code_dir.resolve()):
         raise common.BenchmarkError(f"running from {code_dir} imported minippo from {where}, not from that folder")
     argv = [sys.executable, "-m", "minippo", "train", args.env, "--steps", str(args.updates * 2048), "--seed"]

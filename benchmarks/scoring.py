@@ -47,9 +47,7 @@ def normalized_scores(runs: list[dict], random_return: dict[str, float]) -> dict
     """Table 1's scoring: per task the random policy's return is 0 and the best run of any setting is 1; a setting's
     score is the mean of its runs' normalised returns, ``se`` √(Σ_k s_k²/n_k) / K over its K tasks (None when a task
     has one seed). Returns {setting: {"score", "se", "runs", "tasks", "per_task"}}."""
-    best = {
-        env_id: max(float(r["return_mean"]) for r in runs if r["env"] == env_id) for env_id in {r["env"] for r in runs}
-    }
+    best = {r["env"]: max(float(o["return_mean"]) for o in runs if o["env"] == r["env"]) for r in runs}
     per_task = defaultdict(lambda: defaultdict(list))
     for run in runs:
         env_id = run["env"]
@@ -223,22 +221,17 @@ def score_all(results=RESULTS, folder=TABLES) -> dict[str, list[dict]]:
     # the book's seven tasks (5 seeds at one commit), then the older records, kept for benchmarks/README
     seven = {name: record(name) for name in ("seven_tasks_runs.csv", "mujoco.csv")}
     seven["table1_1m_runs.csv"] = [r for r in default if r["setting"] == "Clipping, ε = 0.2"]
-    details = {
-        "all on": default,
-        **{f"{d} off": record(f"cpi_without_{d}_runs.csv") for d in DETAILS},
-        "all off": paper,
-    }
+    details = {"all on": default, **{f"{d} off": record(f"cpi_without_{d}_runs.csv") for d in DETAILS}}
+    two = {"defaults": default, "as the paper describes it": paper}
     more_seeds = {"seeds 1-3": default, "seeds 4-6": record("table1_1m_more_seeds_runs.csv")}
     tables = {
         "seven_tasks": [row for name, runs in seven.items() for row in seven_tasks(runs, name)],
         # SB3's runs beside minippo's side from the same seven-task runs (peers.py --evaluate)
         "peers": peers([row for row in record("peers.csv") if row["library"] == "sb3"] + record("peers_minippo.csv")),
         "table1_1m": table1(default, randoms, SEVEN_TASKS, [1, 2, 3], STEPS_1M),
-        "table1_1m_two_implementations": on_one_scale(
-            {"defaults": default, "as the paper describes it": paper}, randoms
-        ),
+        "table1_1m_two_implementations": on_one_scale(two, randoms),
         "table1_1m_more_seeds": on_one_scale(more_seeds, randoms),
-        "cpi_one_detail": one_detail(details),
+        "cpi_one_detail": one_detail(details | {"all off": paper}),
         "same_math": same_math(record("same_math.csv")),
     }
     for name, rows in tables.items():

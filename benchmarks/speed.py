@@ -177,10 +177,8 @@ def main(argv=None) -> int:
 
     check_env_id(args.env)  # registers the MinAtar games when asked for one
     load_before = os.getloadavg()[0]
-    config = Config(
-        args.env, total_steps=10_000_000 if atari else 1_000_000, seed=args.seed, **(ATARI if atari else {})
-    )
-    config = config.validate()
+    preset = dict(ATARI, total_steps=10_000_000) if atari else dict(total_steps=1_000_000)
+    config = Config(env_id=args.env, seed=args.seed, **preset).validate()
     versions = {"raw": f"gymnasium {gym.__version__}", "minippo": version("minippo")}
     trainer = Trainer(config)  # each trainer after a warm-up update: first touches of memory, caches, lazy imports
     trainer.run_update()

@@ -112,9 +112,7 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", nargs="+", type=int, default=SEEDS)
     parser.add_argument("--steps", type=int, default=STEPS)
     parser.add_argument("--settings", nargs="+", type=int, metavar="N", help="only these rows of Table 1 (1-11)")
-    parser.add_argument(
-        "--config", nargs="+", default=[], metavar="KEY=VALUE", help="extra Config overrides for every run"
-    )
+    parser.add_argument("--config", nargs="+", default=[], metavar="KEY=VALUE", help="more overrides for every run")
     parser.add_argument("--score", action="store_true", help="only rewrite table1.csv from the recorded runs")
     parser.add_argument("--runs-csv", default=str(RUNS_CSV))
     parser.add_argument("--random", action="store_true", help="only record the random policy's returns on --envs")

@@ -52,9 +52,7 @@ def main(argv=None) -> int:
     parser.add_argument("--env", default="Hopper-v5")
     parser.add_argument("--steps", type=int, default=163_840, help="per run (80 updates of T = 2048 by default)")
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
-    parser.add_argument(
-        "--only", nargs="+", choices=ABLATIONS, metavar="ABLATION", help="only these (the default: all)"
-    )
+    parser.add_argument("--only", nargs="+", choices=ABLATIONS, metavar="ABLATION", help="only these (default: all)")
     common.add_sweep_options(parser)
     args = parser.parse_args(argv)
     common.check_steps(args.steps)
