@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import functools
 import importlib.util
+import itertools
 import json
 import os
 import shlex
@@ -157,9 +158,8 @@ def sb3_run(config_dict: dict, name: str = "", board=None) -> dict:
     columns = ["update", "step", "episodes", "return_mean", "lr", "steps_per_s", "wall_s"]
     lines = [",".join(columns)] + [",".join(repr(row[key]) for key in columns) for row in rows]
     described = {"library": "stable-baselines3", "env_id": config.env_id, "seed": config.seed, **settings}
-    described["ppo"]["learning_rate"] = (
-        f"{rate['initial']} * (progress_remaining + {rate['plus']:.6g})" if rate["anneal"] else rate["initial"]
-    )
+    plain = f"{rate['initial']} * (progress_remaining + {rate['plus']:.6g})" if rate["anneal"] else rate["initial"]
+    described["ppo"]["learning_rate"] = plain
     import ray  # a task of the sweep engine
 
     node = ray.get_runtime_context().get_node_id()[:12] if ray.is_initialized() else ""
@@ -210,12 +210,11 @@ class PeerRun(Run):
 
 def sweep_runs(tasks, seeds, steps, libraries=LIBRARIES) -> list[PeerRun]:
     """Task by task, seed by seed, the libraries side by side (a campaign stopped halfway compares like with like)."""
-    config = {(t, s): Config(env_id=t, total_steps=steps, seed=s) for t in tasks for s in seeds}
-    labels = [{"library": name, "task": t, "seed": s} for t in tasks for s in seeds for name in libraries]
-    return [
-        PeerRun(f"{row['library']}-{row['task']}-seed{row['seed']}", config[row["task"], row["seed"]], row)
-        for row in labels
-    ]
+    runs = []
+    for env_id, seed, library in itertools.product(tasks, seeds, libraries):
+        config, labels = Config(env_id=env_id, total_steps=steps, seed=seed), {"library": library, "task": env_id}
+        runs.append(PeerRun(f"{library}-{env_id}-seed{seed}", config, labels | {"seed": seed}))
+    return runs
 
 
 class PeerSweep(Sweep):

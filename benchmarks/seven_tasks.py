@@ -11,6 +11,7 @@ Each run is ``minippo train ENV --steps 1000000 --seed S``, recorded in results/
 from __future__ import annotations
 
 import argparse
+import itertools
 
 from benchmarks import common
 from benchmarks.scoring import SEVEN_TASKS as TASKS
@@ -27,11 +28,8 @@ def sweep_runs(envs, seeds, steps) -> list:
     from minippo.ppo import Config
     from minippo.sweep import Run
 
-    return [
-        Run(f"{env_id}-seed{seed}", Config(env_id=env_id, total_steps=steps, seed=seed), {"env": env_id, "seed": seed})
-        for env_id in envs
-        for seed in seeds
-    ]
+    runs = itertools.product(envs, seeds)
+    return [Run(f"{e}-seed{s}", Config(env_id=e, total_steps=steps, seed=s), {"env": e, "seed": s}) for e, s in runs]
 
 
 @common.one_line_errors
