@@ -133,8 +133,7 @@ def record_sweep(runs, root, record_csv, fields: list[str], more=None) -> int:
     left = {name: run for name, run in named.items() if name not in recorded}
     added = 0
     for row in read_rows(Path(root) / "sweep.csv"):
-        run = left.pop(tuple(row[k] for k in key), None) if row["status"] == "ok" else None
-        if run is None:
+        if row["status"] != "ok" or (run := left.pop(tuple(row[k] for k in key), None)) is None:
             continue
         extra = more(Path(root) / run.name) if more else {}
         compact_progress(Path(root) / run.name)

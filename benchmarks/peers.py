@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import importlib
 import importlib.util
 import itertools
 import json
@@ -126,8 +127,7 @@ def sb3_run(config_dict: dict, name: str = "", board=None) -> dict:
     class Progress(BaseCallback):
         """One row per update, added once the update is done: when the next rollout starts, or after training."""
 
-        def __init__(self):
-            super().__init__()
+        def _on_training_start(self) -> None:
             self.started, self.episodes = time.perf_counter(), 0
 
         def _on_step(self) -> bool:
@@ -303,12 +303,8 @@ def main(argv=None) -> int:
     if "sb3" in args.libraries and importlib.util.find_spec("stable_baselines3") is None:
         install = 'pip install torch==2.13.0 (the CPU wheel) and then pip install -e ".[bench]"'
         common.fail(f"Stable-Baselines3 is not installed: {install}")
-    try:  # Ray pickles the task; on a cluster this module is only on this machine, so it goes by value
-        from ray import cloudpickle
-
-        cloudpickle.register_pickle_by_value(sys.modules[__name__])
-    except ImportError:  # the engine says that Ray is missing
-        pass
+    if importlib.util.find_spec("ray"):  # Ray pickles the task by value: on a cluster this module is only here
+        importlib.import_module("ray.cloudpickle").register_pickle_by_value(sys.modules[__name__])
     engine = functools.partial(PeerSweep, record_csv=args.csv)
     return common.run_sweep(runs, args.runs, args.csv, FIELDS, args, engine=engine)
 

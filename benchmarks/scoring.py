@@ -82,8 +82,7 @@ def table1(runs: list[dict], randoms: list[dict], tasks, seeds, steps: int) -> l
     """Table 1 from a runs record: the settings with every run of ``tasks`` × ``seeds`` at ``steps`` (while none has,
     the complete tasks), scored, in the paper's order."""
     runs = [r for r in runs if r["env"] in tasks and int(r["seed"]) in seeds and int(r["steps"]) == steps]
-    settings = complete(runs, tasks, seeds, "setting")
-    if settings:
+    if settings := complete(runs, tasks, seeds, "setting"):
         runs = [run for run in runs if run["setting"] in settings]
     else:
         tasks = complete(runs, tasks, seeds, "env")

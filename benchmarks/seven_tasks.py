@@ -2,7 +2,6 @@
 
     python -m benchmarks.seven_tasks                       # every (task, seed) not yet recorded, Hopper first
     python -m benchmarks.seven_tasks --envs Hopper-v5 --seeds 1 2 3
-    python -m benchmarks.seven_tasks --address HOST:PORT   # on a running Ray cluster
     python -m benchmarks.seven_tasks --list                # what is recorded, what is left
 
 Each run is ``minippo train ENV --steps 1000000 --seed S``, recorded in results/mujoco.csv; recorded runs are skipped.

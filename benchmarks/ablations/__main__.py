@@ -1,12 +1,11 @@
-"""Chapter 10's ablations: every implementation detail of minippo switched off, one at a time, against the defaults,
-as a sweep on minippo sweep's engine.
+"""Chapter 10's ablations: each implementation detail of minippo off, one at a time, on minippo sweep's engine.
 
     python -m benchmarks.ablations              # every ablation, seeds 1 and 2, Hopper-v5, 163,840 steps
     python -m benchmarks.ablations --list       # what is recorded, what is left
     python -m benchmarks.ablations --only default anneal_lr --seeds 3
 
-Each run is ``minippo train ... --config <the detail>=false``, recorded in results.csv with ``return_last10``, the
-mean of the last 10 updates' returns; recorded runs are skipped.
+Each run is ``minippo train ... --config <the detail>=false``, recorded in results.csv with ``return_last10`` (the
+mean of the last 10 updates' returns).
 """
 
 from __future__ import annotations
