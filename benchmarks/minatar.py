@@ -22,11 +22,7 @@ from minippo.records import read_rows
 
 GAMES = [f"MinAtar/{game}-v1" for game in ("Asterix", "Breakout", "Freeway", "Seaquest", "SpaceInvaders")]
 ALGORITHMS = {"PPO": "atari", "A2C": "a2c"}  # name: preset
-SEEDS = [1, 2, 3]
 RUN_FIELDS = ["algorithm", "env", "seed", "steps", "return_mean", "wall_s", "steps_per_s", "commit", "command"]
-RUNS_CSV = common.RESULTS / "minatar_runs.csv"
-TABLE_CSV = common.RESULTS / "minatar.csv"
-RUN_ROOT = common.RUNS / "minatar"
 
 
 def run_name(algorithm: str, env_id: str, seed: int) -> str:
@@ -91,12 +87,12 @@ def write_table(runs_csv, root, table_csv, envs, seeds) -> list[dict]:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--envs", nargs="+", default=GAMES, metavar="ENV")
-    parser.add_argument("--seeds", nargs="+", type=int, default=SEEDS)
+    parser.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3])
     parser.add_argument("--steps", type=int, help="environment steps per run (required unless --score)")
     parser.add_argument("--score", action="store_true", help="only rewrite minatar.csv from the recorded runs")
-    parser.add_argument("--runs-csv", default=str(RUNS_CSV))
-    parser.add_argument("--table-csv", default=str(TABLE_CSV))
-    parser.add_argument("--runs", default=str(RUN_ROOT), help="the folder of run folders")
+    parser.add_argument("--runs-csv", default=str(common.RESULTS / "minatar_runs.csv"))
+    parser.add_argument("--table-csv", default=str(common.RESULTS / "minatar.csv"))
+    parser.add_argument("--runs", default=str(common.RUNS / "minatar"), help="the folder of run folders")
     common.add_sweep_options(parser)
     args = parser.parse_args(argv)
     if not args.score and (args.steps is None or args.steps < 1024):

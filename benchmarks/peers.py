@@ -67,16 +67,8 @@ def sb3_settings(config: Config) -> dict:
 
 def version(library: str) -> str:
     """The library's version and its array library's, as the records and the speed race keep them."""
-    if library == "sb3":
-        import stable_baselines3
-        import torch
-
-        return f"stable-baselines3 {stable_baselines3.__version__}, torch {torch.__version__}"
-    import numpy
-
-    import minippo
-
-    return f"minippo {minippo.__version__}, numpy {numpy.__version__}"
+    names = ("stable_baselines3", "torch") if library == "sb3" else ("minippo", "numpy")
+    return ", ".join(f"{name.replace('_', '-')} {importlib.import_module(name).__version__}" for name in names)
 
 
 def minippo_run(config_dict: dict, name: str = "", board=None, resume: dict | None = None) -> dict:

@@ -15,11 +15,7 @@ import itertools
 from benchmarks import common
 from benchmarks.scoring import SEVEN_TASKS as TASKS
 
-SEEDS = [1, 2, 3]
-STEPS = 1_000_000
 FIELDS = ["env", "seed", "steps", "return_mean", "wall_s", "steps_per_s", "commit", "command"]
-CSV_PATH = common.RESULTS / "mujoco.csv"
-RUN_ROOT = common.RUNS / "mujoco"
 
 
 def sweep_runs(envs, seeds, steps) -> list:
@@ -35,10 +31,10 @@ def sweep_runs(envs, seeds, steps) -> list:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--envs", nargs="+", default=TASKS, choices=TASKS, metavar="ENV", help="of the seven tasks")
-    parser.add_argument("--seeds", nargs="+", type=int, default=SEEDS)
-    parser.add_argument("--steps", type=int, default=STEPS)
-    parser.add_argument("--csv", default=str(CSV_PATH), help="where to append the records")
-    parser.add_argument("--runs", default=str(RUN_ROOT), help="the folder of run folders")
+    parser.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3])
+    parser.add_argument("--steps", type=int, default=1_000_000)
+    parser.add_argument("--csv", default=str(common.RESULTS / "mujoco.csv"), help="where to append the records")
+    parser.add_argument("--runs", default=str(common.RUNS / "mujoco"), help="the folder of run folders")
     common.add_sweep_options(parser)
     args = parser.parse_args(argv)
     common.check_steps(args.steps)

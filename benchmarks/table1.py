@@ -21,13 +21,8 @@ SETTINGS += [(f"Clipping, ε = {eps}", "clip", [f"clip_epsilon={eps}"]) for eps 
 SETTINGS += [(f"Adaptive KL, d_targ = {d}", "klpen", [f"kl_target={d}"]) for d in ("0.003", "0.01", "0.03")]
 SETTINGS += [(f"Fixed KL, β = {b}", "klpen", ["adaptive_kl=false", f"kl_beta={b}"]) for b in ("0.3", "1", "3", "10")]
 TASKS = ["HalfCheetah-v5", "Hopper-v5", "InvertedDoublePendulum-v5"]
-SEEDS = [1, 2, 3]
-STEPS = 250_000
 RUN_FIELDS = ["setting", "env", "seed", "steps", "return_mean", "wall_s", "steps_per_s", "commit", "command"]
-RUNS_CSV = common.RESULTS / "table1_runs.csv"
-TABLE_CSV = common.RESULTS / "table1.csv"
 RANDOM_FIELDS = ["env", "episodes", "seed", "return_mean", "return_std", "length_mean", "commit", "command"]
-RUN_ROOT = common.RUNS / "table1"
 RANDOM_CSV = common.RESULTS / "random.csv"
 
 
@@ -109,15 +104,15 @@ def sweep_runs(settings, envs, seeds, steps) -> list:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--envs", nargs="+", default=TASKS, metavar="ENV")
-    parser.add_argument("--seeds", nargs="+", type=int, default=SEEDS)
-    parser.add_argument("--steps", type=int, default=STEPS)
+    parser.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3])
+    parser.add_argument("--steps", type=int, default=250_000)
     parser.add_argument("--settings", nargs="+", type=int, metavar="N", help="only these rows of Table 1 (1-11)")
     parser.add_argument("--config", nargs="+", default=[], metavar="KEY=VALUE", help="more overrides for every run")
     parser.add_argument("--score", action="store_true", help="only rewrite table1.csv from the recorded runs")
-    parser.add_argument("--runs-csv", default=str(RUNS_CSV))
+    parser.add_argument("--runs-csv", default=str(common.RESULTS / "table1_runs.csv"))
     parser.add_argument("--random", action="store_true", help="only record the random policy's returns on --envs")
-    parser.add_argument("--table-csv", default=str(TABLE_CSV))
-    parser.add_argument("--runs", default=str(RUN_ROOT), help="the folder of run folders")
+    parser.add_argument("--table-csv", default=str(common.RESULTS / "table1.csv"))
+    parser.add_argument("--runs", default=str(common.RUNS / "table1"), help="the folder of run folders")
     common.add_sweep_options(parser)
     args = parser.parse_args(argv)
     common.check_steps(args.steps)
