@@ -30,12 +30,9 @@ from minippo.records import append_row, read_rows
 from minippo.sweep import Run, Sweep
 
 TASKS = ["Hopper-v5", "HalfCheetah-v5", "Walker2d-v5"]
-SEEDS = [1, 2, 3, 4, 5]
-STEPS = 1_000_000
 LIBRARIES = ["minippo", "sb3"]
 EVAL_EPISODES, EVAL_SEED = 10, 0  # minippo eval's defaults: episode k is reset with seed EVAL_SEED + k
 FIELDS = ["library", "version", "task", "seed", "steps", "return_mean", "eval_mean", "wall_s", "commit", "command"]
-CSV_PATH = common.RESULTS / "peers.csv"
 RUN_ROOT = common.RUNS / "peers"
 
 
@@ -266,10 +263,10 @@ def evaluate_record(runs_csv, runs_root, record_csv, tasks=TASKS) -> int:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--tasks", nargs="+", default=TASKS, metavar="TASK", help="Gymnasium ids (continuous actions)")
-    parser.add_argument("--seeds", nargs="+", type=int, default=SEEDS)
-    parser.add_argument("--steps", type=int, default=STEPS)
+    parser.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3, 4, 5])
+    parser.add_argument("--steps", type=int, default=1_000_000)
     parser.add_argument("--libraries", nargs="+", default=LIBRARIES, choices=LIBRARIES)
-    parser.add_argument("--csv", default=str(CSV_PATH), help="where to append the records")
+    parser.add_argument("--csv", default=str(common.RESULTS / "peers.csv"), help="where to append the records")
     parser.add_argument("--runs", default=str(RUN_ROOT), help="the folder of run folders")
     parser.add_argument("--evaluate", metavar="RUNS_CSV", help="record minippo's side from these runs (in --runs)")
     common.add_sweep_options(parser)
