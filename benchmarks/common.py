@@ -1,15 +1,16 @@
-"""What the runners share: the repository's paths, a one-line error, one CSV writer, the progress.csv rounding of
-committed runs, and running a list of ``minippo.sweep.Run`` on minippo sweep's engine into a record of the runner's
-own columns (what is recorded and what is left, ``--list``, resuming)."""
+"""What the runners share: paths, one-line errors, a CSV writer, the rounding of committed progress.csv files, and
+running ``minippo.sweep.Run``s on minippo sweep's engine into a record of the runner's columns (--list, resuming)."""
 
 from __future__ import annotations
 
 import csv
+import functools
 import os
 import shlex
 import sys
 from pathlib import Path
 
+from minippo.errors import MinippoError
 from minippo.records import append_row, check_columns, commit_of_code, read_rows
 
 ROOT = Path(__file__).resolve().parent.parent  # the repository
@@ -19,14 +20,27 @@ RUNS = ROOT / "benchmarks" / "runs"
 THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
-class BenchmarkError(Exception):
-    """A problem to report on one line (bad arguments, a failed training)."""
+class BenchmarkError(ValueError):
+    """A problem to report on one line (bad arguments or records, a failed training)."""
 
 
 def fail(message: str) -> None:
     program = Path(sys.argv[0])  # a runner's file, or the folder of a package's __main__.py
     print(f"{program.parent.name if program.stem == '__main__' else program.name}: error: {message}", file=sys.stderr)
     raise SystemExit(2)
+
+
+def one_line_errors(main):
+    """A runner's ``main`` with its BenchmarkError or MinippoError reported on one line (``fail``)."""
+
+    @functools.wraps(main)
+    def guarded(*args, **kwargs):
+        try:
+            return main(*args, **kwargs)
+        except (BenchmarkError, MinippoError) as error:
+            fail(str(error))
+
+    return guarded
 
 
 def relative(path) -> str:
@@ -47,20 +61,15 @@ def invocation(module: str, argv) -> str:
 def compact_progress(run_dir, digits: int = 6) -> None:
     """Round progress.csv's numbers to ``digits`` significant digits (it is committed; full floats triple its size)."""
     path = Path(run_dir) / "progress.csv"
-    rows = read_rows(path)
-    if not rows:
-        return
 
     def short(text: str) -> str:
         try:
-            value = float(text)
+            return text if text.lstrip("-").isdigit() else f"{float(text):.{digits}g}"
         except ValueError:
             return text
-        if value.is_integer() and abs(value) < 1e15 and "." not in text and "e" not in text.lower():
-            return text
-        return f"{value:.{digits}g}"
 
-    write_rows(path, [{k: short(v) for k, v in row.items()} for row in rows])
+    if rows := read_rows(path):
+        write_rows(path, [{k: short(v) for k, v in row.items()} for row in rows])
 
 
 def write_rows(path, rows: list[dict], fields=None) -> Path:
@@ -77,11 +86,12 @@ def write_rows(path, rows: list[dict], fields=None) -> Path:
 
 
 def add_sweep_options(parser) -> None:
-    """The engine's options, as ``minippo sweep`` has them."""
+    """The engine's options, as ``minippo sweep`` has them, and ``--list``."""
     parser.add_argument("--workers", type=int, help="trainings at once (default: every core, or the cluster's CPUs)")
     parser.add_argument("--address", help="a running Ray cluster, HOST:PORT (default: $RAY_ADDRESS, else this machine)")
     parser.add_argument("--retries", type=int, default=0, help="tries again a failed training this many times")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--list", action="store_true", help="show what is recorded and what is left, then stop")
 
 
 def check_steps(steps: int, least: int = 2048) -> None:
@@ -89,42 +99,41 @@ def check_steps(steps: int, least: int = 2048) -> None:
         fail(f"--steps must be at least one horizon ({least}), not {steps}")
 
 
-def label_key(runs, fields) -> list[str]:
-    """The record's columns that name a run: its labels, in the record's order."""
-    return [field for field in fields if runs and field in runs[0].labels]
+def keyed(runs, record_csv, fields) -> tuple[list, dict, dict]:
+    """(key, {a run's key: run}, {a row's key: row of ``record_csv``}): a key is the values, as text, of the record's
+    columns that name a run (its labels), in the record's order."""
+    key = [field for field in fields if runs and field in runs[0].labels]
+    named = {tuple(str(run.labels[k]) for k in key): run for run in runs}
+    return key, named, {tuple(row[k] for k in key): row for row in read_rows(record_csv)}
 
 
 def todo(runs, record_csv, fields) -> list:
     """The runs that ``record_csv`` does not hold yet."""
-    key = label_key(runs, fields)
-    recorded = {tuple(row[k] for k in key) for row in read_rows(record_csv)}
-    return [run for run in runs if tuple(str(run.labels[k]) for k in key) not in recorded]
+    _, named, recorded = keyed(runs, record_csv, fields)
+    return [run for name, run in named.items() if name not in recorded]
 
 
 def show_list(runs, record_csv, fields) -> int:
     """``--list``: every run, recorded (with its scores) or still to do."""
-    key = label_key(runs, fields)
-    done = {tuple(row[k] for k in key): row for row in read_rows(record_csv)}
-    shown = [{k: f"seed {run.labels[k]}" if k == "seed" else str(run.labels[k]) for k in key} for run in runs]
-    widths = {k: max(len(labels[k]) for labels in shown) for k in key}
-    for run, labels in zip(runs, shown):
-        row = done.get(tuple(str(run.labels[k]) for k in key), {})
-        label = "  ".join(f"{labels[k]:<{widths[k]}}" for k in key)
-        scores = "".join(f"  {name[:-5]} {row[name]:>9}" for name in ("return_mean", "eval_mean") if name in row)
+    key, named, recorded = keyed(runs, record_csv, fields)
+    shown = [[f"seed {v}" if k == "seed" else v for k, v in zip(key, name)] for name in named]
+    widths = [max(map(len, column)) for column in zip(*shown)]
+    for name, texts in zip(named, shown):
+        row = recorded.get(name, {})
+        label = "  ".join(f"{text:<{width}}" for text, width in zip(texts, widths))
+        scores = "".join(f"  {col[:-5]} {row[col]:>9}" for col in ("return_mean", "eval_mean") if col in row)
         print(f"{'recorded' if row else 'to do':<8}  {label}{scores}")
     return 0
 
 
 def record_sweep(runs, root, record_csv, fields: list[str], more=None) -> int:
-    """Copy the ok rows of ``root/sweep.csv`` that ``record_csv`` lacks into it (their labels, then steps, return,
-    clock, commit and command, and ``more(folder)``'s columns), rounding each run's progress.csv; returns how many
-    were added."""
-    key = label_key(runs, fields)
-    left = {tuple(str(run.labels[k]) for k in key): run for run in todo(runs, record_csv, fields)}
+    """Copy the ok rows of ``root/sweep.csv`` that ``record_csv`` lacks into it, with ``more(folder)``'s columns,
+    rounding each run's progress.csv; returns how many were added."""
+    key, named, recorded = keyed(runs, record_csv, fields)
+    left = {name: run for name, run in named.items() if name not in recorded}
     added = 0
     for row in read_rows(Path(root) / "sweep.csv"):
-        run = left.pop(tuple(row[k] for k in key), None) if row["status"] == "ok" else None
-        if run is None:
+        if row["status"] != "ok" or (run := left.pop(tuple(row[k] for k in key), None)) is None:
             continue
         extra = more(Path(root) / run.name) if more else {}
         compact_progress(Path(root) / run.name)
@@ -137,21 +146,16 @@ def record_sweep(runs, root, record_csv, fields: list[str], more=None) -> int:
 
 
 def run_sweep(runs, root, record_csv, fields: list[str], args, engine=None, more=None) -> int:
-    """Run the ``runs`` that ``record_csv`` does not hold on minippo sweep's engine into the folder ``root`` (each
-    run, failed ones too, is logged in ``root/sweep.csv`` with the node it ran on), then record the finished ones
-    (``more``: see ``record_sweep``); with ``args.list``, only show what is recorded and what is left. ``engine``: a
-    ``minippo.sweep.Sweep`` maker whose ``finish`` writes the record itself. Returns the exit code."""
-    from minippo.errors import MinippoError
+    """Run the ``runs`` that ``record_csv`` lacks on minippo sweep's engine into ``root`` (which logs every run in
+    ``root/sweep.csv``), then record the finished ones (``more``: see ``record_sweep``), or with ``args.list`` show
+    them. ``engine``: a ``Sweep`` maker whose ``finish`` writes the record itself. Returns the exit code."""
     from minippo.sweep import Sweep
 
-    if getattr(args, "list", False):
+    if args.list:
         return show_list(runs, record_csv, fields)
     if args.workers is not None and args.workers < 1:
         fail(f"--workers must be at least 1, not {args.workers}")
-    try:
-        check_columns(record_csv, fields)
-    except MinippoError as error:
-        fail(str(error))
+    check_columns(record_csv, fields)
     root = relative(root)  # the commands in the records name the folder from the repository's root
     if engine is None:
         record_sweep(runs, root, record_csv, fields, more)  # runs an interrupted invocation finished
@@ -163,8 +167,6 @@ def run_sweep(runs, root, record_csv, fields: list[str], args, engine=None, more
     job = (engine or Sweep)(left, root, **options)
     try:
         code = 1 if job.run() else 0
-    except MinippoError as error:
-        fail(str(error))
     except KeyboardInterrupt:
         print(f"interrupted; {job.recorded} runs recorded; the same command continues", file=sys.stderr)
         code = 130

@@ -3,30 +3,26 @@
     python -m benchmarks.minatar --steps N       # every (algorithm, game, seed) not yet recorded, then the table
     python -m benchmarks.minatar --score         # only recompute benchmarks/results/minatar.csv from the records
 
-PPO runs with ``--preset atari`` (the paper's Table 5), A2C with ``--preset a2c``, on the same network, each run a
-``minippo train``; recorded runs are skipped. Both of the paper's scores, from each run's ``episodes.csv``: the mean
-episode return over all of training and over the last 100 episodes; a game is won by the higher mean over seeds.
---steps from the speed measured by ``benchmarks.speed --env MinAtar/Breakout-v1``: hours × 3600 × workers × steps/s/30.
+PPO runs ``minippo train --preset atari`` (the paper's Table 5), A2C ``--preset a2c``, on the same network. Both of
+the paper's scores, from each run's ``episodes.csv``: the mean return over all of training and over the last 100
+episodes; a game is won by the higher mean over seeds. --steps: hours × 3600 × workers × steps/s (``benchmarks.speed
+--env MinAtar/Breakout-v1``) / 30.
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 from pathlib import Path
 
 import numpy as np
 
 from benchmarks import common
-from minippo.errors import MinippoError
 from minippo.records import read_rows
 
 GAMES = [f"MinAtar/{game}-v1" for game in ("Asterix", "Breakout", "Freeway", "Seaquest", "SpaceInvaders")]
 ALGORITHMS = {"PPO": "atari", "A2C": "a2c"}  # name: preset
-SEEDS = [1, 2, 3]
 RUN_FIELDS = ["algorithm", "env", "seed", "steps", "return_mean", "wall_s", "steps_per_s", "commit", "command"]
-RUNS_CSV = common.RESULTS / "minatar_runs.csv"
-TABLE_CSV = common.RESULTS / "minatar.csv"
-RUN_ROOT = common.RUNS / "minatar"
 
 
 def run_name(algorithm: str, env_id: str, seed: int) -> str:
@@ -40,13 +36,10 @@ def sweep_runs(algorithms, envs, seeds, steps) -> list:
     from minippo.sweep import Run
 
     runs = []
-    for env_id in envs:
-        for seed in seeds:
-            for algorithm in algorithms:
-                preset = ALGORITHMS[algorithm]
-                config = Config(env_id=env_id, total_steps=steps, seed=seed, **PRESETS[preset]).validate()
-                labels = {"algorithm": algorithm, "env": env_id, "seed": seed}
-                runs.append(Run(run_name(algorithm, env_id, seed), config, labels, ["--preset", preset]))
+    for env_id, seed, algorithm in itertools.product(envs, seeds, algorithms):
+        config = Config(env_id=env_id, total_steps=steps, seed=seed, **PRESETS[ALGORITHMS[algorithm]]).validate()
+        labels = {"algorithm": algorithm, "env": env_id, "seed": seed}
+        runs.append(Run(run_name(algorithm, env_id, seed), config, labels, ["--preset", ALGORITHMS[algorithm]]))
     return runs
 
 
@@ -90,32 +83,29 @@ def write_table(runs_csv, root, table_csv, envs, seeds) -> list[dict]:
     return table
 
 
+@common.one_line_errors
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--envs", nargs="+", default=GAMES, metavar="ENV")
-    parser.add_argument("--seeds", nargs="+", type=int, default=SEEDS)
-    parser.add_argument("--algorithms", nargs="+", choices=list(ALGORITHMS), default=list(ALGORITHMS))
+    parser.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3])
     parser.add_argument("--steps", type=int, help="environment steps per run (required unless --score)")
     parser.add_argument("--score", action="store_true", help="only rewrite minatar.csv from the recorded runs")
-    parser.add_argument("--runs-csv", default=str(RUNS_CSV))
-    parser.add_argument("--table-csv", default=str(TABLE_CSV))
-    parser.add_argument("--runs", default=str(RUN_ROOT), help="the folder of run folders")
+    parser.add_argument("--runs-csv", default=str(common.RESULTS / "minatar_runs.csv"))
+    parser.add_argument("--table-csv", default=str(common.RESULTS / "minatar.csv"))
+    parser.add_argument("--runs", default=str(common.RUNS / "minatar"), help="the folder of run folders")
     common.add_sweep_options(parser)
     args = parser.parse_args(argv)
     if not args.score and (args.steps is None or args.steps < 1024):
         common.fail("--steps is required, at least one PPO batch (8 × 128 = 1024 steps)")
     code = 0
-    try:
-        if not args.score:
-            runs = sweep_runs(args.algorithms, args.envs, args.seeds, args.steps)
-            code = common.run_sweep(runs, args.runs, args.runs_csv, RUN_FIELDS, args)
-            if code == 130:
-                return code
-        for run_dir in sorted(Path(args.runs).glob("*-MinAtar-*")):
-            write_episodes(run_dir)
-        table = write_table(args.runs_csv, args.runs, args.table_csv, args.envs, args.seeds)
-    except (common.BenchmarkError, MinippoError) as error:
-        common.fail(str(error))
+    if not args.score:
+        runs = sweep_runs(list(ALGORITHMS), args.envs, args.seeds, args.steps)
+        code = common.run_sweep(runs, args.runs, args.runs_csv, RUN_FIELDS, args)
+        if code == 130 or args.list:  # interrupted, or only listed: the table waits
+            return code
+    for run_dir in sorted(Path(args.runs).glob("*-MinAtar-*")):
+        write_episodes(run_dir)
+    table = write_table(args.runs_csv, args.runs, args.table_csv, args.envs, args.seeds)
     for rule in ("all_training", "last_100"):
         won = sum(row[f"winner_{rule}"] == "PPO" for row in table)
         print(f"{rule}: PPO wins {won} of {sum(bool(row[f'winner_{rule}']) for row in table)} games")

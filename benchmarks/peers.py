@@ -1,6 +1,5 @@
-"""Learning quality side by side with Stable-Baselines3: minippo's PPO and SB3's PPO on the same tasks, settings
-(``sb3_settings`` translates minippo's ``Config``; benchmarks/README.md tabulates each match), seeds and machine, as a
-sweep on minippo sweep's engine; each run scored on its last 100 training episodes and on 10 deterministic episodes.
+"""Learning quality beside Stable-Baselines3: both libraries' PPO on the same tasks, settings (``sb3_settings``;
+benchmarks/README.md tabulates each match), seeds and machine, on minippo sweep's engine.
 
     python -m benchmarks.peers                       # 3 tasks × seeds 1–5 × 2 libraries × 1M steps: 30 runs
     python -m benchmarks.peers --tasks Hopper-v5 --seeds 1 2 --libraries sb3
@@ -11,7 +10,9 @@ from __future__ import annotations
 
 import argparse
 import functools
+import importlib
 import importlib.util
+import itertools
 import json
 import os
 import shlex
@@ -29,81 +30,46 @@ from minippo.records import append_row, read_rows
 from minippo.sweep import Run, Sweep
 
 TASKS = ["Hopper-v5", "HalfCheetah-v5", "Walker2d-v5"]
-SEEDS = [1, 2, 3, 4, 5]
-STEPS = 1_000_000
 LIBRARIES = ["minippo", "sb3"]
 EVAL_EPISODES, EVAL_SEED = 10, 0  # minippo eval's defaults: episode k is reset with seed EVAL_SEED + k
 FIELDS = ["library", "version", "task", "seed", "steps", "return_mean", "eval_mean", "wall_s", "commit", "command"]
-CSV_PATH = common.RESULTS / "peers.csv"
 RUN_ROOT = common.RUNS / "peers"
-
-
-# SB3's settings, from minippo's Config
 
 
 def sb3_settings(config: Config) -> dict:
     """The arguments of ``stable_baselines3.PPO`` and ``VecNormalize`` that make SB3 train as minippo does with
-    ``config`` (JSON: the task turns the names into torch objects). Where SB3 cannot do what minippo does, the
-    comment says so; benchmarks/README.md has the whole table."""
-    batch = config.num_envs * config.horizon
-    return {
-        "ppo": {
-            "n_steps": config.horizon,
-            "batch_size": config.minibatch_size,
-            "n_epochs": config.epochs,
-            # minippo's update k (1-based) of K steps at lr·(1 − (k − 1)/K). SB3 calls the schedule with the
-            # progress remaining after update k's rollout, 1 − k/K, so lr·(p + 1/K) gives the same step size.
-            "learning_rate": {"initial": config.lr, "anneal": config.anneal_lr, "plus": 1 / config.num_updates},
-            "gamma": config.gamma,
-            "gae_lambda": config.gae_lambda,
-            "clip_range": config.clip_epsilon,
-            # SB3 can clip the value only by replacing it (no max with the unclipped loss, as minippo's): left off
-            "clip_range_vf": None,
-            "normalize_advantage": config.normalize_advantages,
-            "ent_coef": config.entropy_coef,
-            # minippo's value loss is ½·mean((V − V^targ)²), SB3's mean((V − V^targ)²): half the coefficient is the
-            # same loss, hence the same gradient and the same global-norm clip
-            "vf_coef": config.value_coef / 2,
-            "max_grad_norm": config.max_grad_norm if config.grad_norm_clipping else float("inf"),
-            "target_kl": config.target_kl,  # None in both (the paper has no early stop); SB3's rule would differ
-            "policy_kwargs": {
-                "net_arch": {"pi": list(config.hidden_sizes), "vf": list(config.hidden_sizes)},
-                "activation_fn": "tanh",
-                "share_features_extractor": True,  # a flatten: no parameters to share; the two MLPs are separate
-                "ortho_init": config.orthogonal_init,  # gains √2 hidden, 0.01 policy output, 1 value output
-                "log_std_init": config.log_std_init,
-                "optimizer_kwargs": {"eps": config.adam_eps},
-            },
-            "device": "cpu",
-            "seed": config.seed,
-        },
-        "vec_normalize": {
-            "norm_obs": config.normalize_observations,
-            "norm_reward": config.scale_rewards,
-            "clip_obs": config.obs_clip,
-            "clip_reward": config.reward_clip,
-            "gamma": config.gamma,
-            "epsilon": 1e-8,
-        },
-        "total_timesteps": config.num_updates * batch,
-        "n_envs": config.num_envs,
-    }
+    ``config``, as JSON (``sb3_model`` makes the torch objects); comments say where SB3 cannot do as minippo does."""
+    ppo = dict(n_steps=config.horizon, batch_size=config.minibatch_size, n_epochs=config.epochs)
+    # minippo's update k (1-based) of K steps at lr·(1 − (k − 1)/K). SB3 calls the schedule with the progress
+    # remaining after update k's rollout, 1 − k/K, so lr·(p + 1/K) gives the same step size.
+    ppo["learning_rate"] = {"initial": config.lr, "anneal": config.anneal_lr, "plus": 1 / config.num_updates}
+    ppo |= dict(gamma=config.gamma, gae_lambda=config.gae_lambda, clip_range=config.clip_epsilon)
+    # SB3 can clip the value only by replacing it (no max with the unclipped loss, as minippo's): left off
+    ppo |= dict(clip_range_vf=None, normalize_advantage=config.normalize_advantages, ent_coef=config.entropy_coef)
+    # minippo's value loss is ½·mean((V − V^targ)²), SB3's mean((V − V^targ)²): half the coefficient is the same
+    # loss, hence the same gradient and the same global-norm clip
+    ppo["vf_coef"] = config.value_coef / 2
+    ppo["max_grad_norm"] = config.max_grad_norm if config.grad_norm_clipping else float("inf")
+    ppo["target_kl"] = config.target_kl  # None in both (the paper has no early stop); SB3's rule would differ
+    net = dict(net_arch={"pi": list(config.hidden_sizes), "vf": list(config.hidden_sizes)}, activation_fn="tanh")
+    net["share_features_extractor"] = True  # a flatten: no parameters to share; the two MLPs are separate
+    net["ortho_init"] = config.orthogonal_init  # gains √2 hidden, 0.01 policy output, 1 value output
+    net |= dict(log_std_init=config.log_std_init, optimizer_kwargs={"eps": config.adam_eps})
+    ppo |= dict(policy_kwargs=net, device="cpu", seed=config.seed)
+    normalize = dict(norm_obs=config.normalize_observations, norm_reward=config.scale_rewards, clip_obs=config.obs_clip)
+    normalize |= dict(clip_reward=config.reward_clip, gamma=config.gamma, epsilon=1e-8)
+    steps = config.num_updates * config.num_envs * config.horizon
+    return {"ppo": ppo, "vec_normalize": normalize, "total_timesteps": steps, "n_envs": config.num_envs}
 
 
-# the Ray task (called like minippo.sweep.train_run, returning the same kind of result plus "eval" and "version")
-
-
-def minippo_version() -> str:
-    import numpy
-
-    import minippo
-
-    return f"minippo {minippo.__version__}, numpy {numpy.__version__}"
+def version(library: str) -> str:
+    """The library's version and its array library's, as the records and the speed race keep them."""
+    names = ("stable_baselines3", "torch") if library == "sb3" else ("minippo", "numpy")
+    return ", ".join(f"{name.replace('_', '-')} {importlib.import_module(name).__version__}" for name in names)
 
 
 def minippo_run(config_dict: dict, name: str = "", board=None, resume: dict | None = None) -> dict:
-    """``minippo train`` as the sweep engine runs it, then minippo's own deterministic evaluation of the final
-    policy (``minippo eval RUN --episodes 10 --seed 0``)."""
+    """The sweep engine's ``train_run``, then ``minippo eval RUN --episodes 10 --seed 0`` of the final policy."""
     from threadpoolctl import threadpool_limits
 
     from minippo.evaluate import evaluate
@@ -114,13 +80,13 @@ def minippo_run(config_dict: dict, name: str = "", board=None, resume: dict | No
         policy = Path(scratch) / "policy.npz"
         policy.write_bytes(result["files"]["policy.npz"])
         result["eval"] = evaluate(policy, EVAL_EPISODES, EVAL_SEED)
-    result["version"] = minippo_version()
+    result["version"] = version("minippo")
     return result
 
 
 def sb3_model(config: Config):
-    """Stable-Baselines3's PPO and its VecNormalize environment, made from ``sb3_settings(config)`` (one torch
-    thread); the speed race uses it too."""
+    """SB3's PPO and its VecNormalize environment from ``sb3_settings(config)``, one torch thread (the speed race's
+    too)."""
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_util import make_vec_env
@@ -128,22 +94,16 @@ def sb3_model(config: Config):
 
     torch.set_num_threads(1)
     settings = sb3_settings(config)
-    kwargs = dict(settings["ppo"])
-    rate = kwargs["learning_rate"]
-    kwargs["learning_rate"] = (
-        (lambda left: rate["initial"] * (left + rate["plus"])) if rate["anneal"] else rate["initial"]
-    )
-    kwargs["policy_kwargs"] = {**kwargs["policy_kwargs"], "activation_fn": torch.nn.Tanh}
+    rate = settings["ppo"]["learning_rate"]
+    schedule = (lambda left: rate["initial"] * (left + rate["plus"])) if rate["anneal"] else rate["initial"]
+    net = {**settings["ppo"]["policy_kwargs"], "activation_fn": torch.nn.Tanh}
     env = VecNormalize(make_vec_env(config.env_id, settings["n_envs"], config.seed), **settings["vec_normalize"])
-    return PPO("MlpPolicy", env, verbose=0, **kwargs), env
+    return PPO("MlpPolicy", env, verbose=0, **settings["ppo"] | {"learning_rate": schedule, "policy_kwargs": net}), env
 
 
 def sb3_run(config_dict: dict, name: str = "", board=None) -> dict:
-    """Stable-Baselines3 PPO with ``sb3_settings(config)``, one torch thread, then the same deterministic evaluation
-    as minippo's. Its progress.csv has minippo's columns where SB3 has the number (one row per update)."""
+    """``train_run`` for SB3 PPO, then the same evaluation as minippo's; progress.csv in minippo's columns."""
     import numpy as np
-    import stable_baselines3
-    import torch
     from stable_baselines3.common.callbacks import BaseCallback
     from threadpoolctl import threadpool_limits
 
@@ -156,8 +116,7 @@ def sb3_run(config_dict: dict, name: str = "", board=None) -> dict:
     class Progress(BaseCallback):
         """One row per update, added once the update is done: when the next rollout starts, or after training."""
 
-        def __init__(self):
-            super().__init__()
+        def _on_training_start(self) -> None:
             self.started, self.episodes = time.perf_counter(), 0
 
         def _on_step(self) -> bool:
@@ -188,55 +147,46 @@ def sb3_run(config_dict: dict, name: str = "", board=None) -> dict:
     columns = ["update", "step", "episodes", "return_mean", "lr", "steps_per_s", "wall_s"]
     lines = [",".join(columns)] + [",".join(repr(row[key]) for key in columns) for row in rows]
     described = {"library": "stable-baselines3", "env_id": config.env_id, "seed": config.seed, **settings}
-    described["ppo"]["learning_rate"] = (
-        f"{rate['initial']} * (progress_remaining + {rate['plus']:.6g})" if rate["anneal"] else rate["initial"]
-    )
+    plain = f"{rate['initial']} * (progress_remaining + {rate['plus']:.6g})" if rate["anneal"] else rate["initial"]
+    described["ppo"]["learning_rate"] = plain
     import ray  # a task of the sweep engine
 
     node = ray.get_runtime_context().get_node_id()[:12] if ray.is_initialized() else ""
     files = {"config.json": json.dumps(described, indent=2) + "\n", "progress.csv": "\n".join(lines) + "\n"}
-    version = f"stable-baselines3 {stable_baselines3.__version__}, torch {torch.__version__}"
     result = {"files": {key: text.encode() for key, text in files.items()}, "last": rows[-1], "eval": episodes}
-    return result | {"version": version, "node": node, "host": socket.gethostname(), "pid": os.getpid()}
+    return result | {"version": version("sb3"), "node": node, "host": socket.gethostname(), "pid": os.getpid()}
 
 
 def sb3_evaluate(model, venv, env_id: str, episodes: int, seed: int) -> list[float]:
-    """minippo's evaluation for an SB3 model: ``episodes`` episodes reset with seeds seed, seed + 1, ..., the mean
-    action (clipped to the bounds by ``predict``), observations normalised with the training statistics frozen
-    (``training=False``), original rewards summed (``norm_reward=False``)."""
+    """minippo's evaluation for an SB3 model: episodes reset with seeds seed, seed + 1, ..., the mean action (clipped
+    by ``predict``), observations normalised with frozen statistics, original rewards summed."""
     import gymnasium as gym
     import numpy as np
 
     venv.training, venv.norm_reward = False, False
-    env = gym.make(env_id, disable_env_checker=True)
     returns = []
-    for episode in range(episodes):
-        obs, _ = env.reset(seed=seed + episode)
-        total, done = 0.0, False
-        while not done:
-            action, _ = model.predict(venv.normalize_obs(np.asarray(obs, dtype=np.float64)), deterministic=True)
-            obs, reward, terminated, truncated, _ = env.step(action)
-            total += float(reward)
-            done = terminated or truncated
-        returns.append(total)
-    env.close()
+    with gym.make(env_id, disable_env_checker=True) as env:
+        for episode in range(episodes):
+            obs, _ = env.reset(seed=seed + episode)
+            total, done = 0.0, False
+            while not done:
+                action, _ = model.predict(venv.normalize_obs(np.asarray(obs, dtype=np.float64)), deterministic=True)
+                obs, reward, terminated, truncated, _ = env.step(action)
+                total, done = total + float(reward), terminated or truncated
+            returns.append(total)
     return returns
 
 
 def peer_run(config_dict: dict, name: str = "", board=None, resume: dict | None = None) -> dict:
-    """The sweep engine's task for both libraries: the run's name says which (``sb3-…`` or ``minippo-…``). Only
-    minippo's runs keep checkpoints, so only they are ever handed ``resume``."""
+    """The engine's task for both libraries, by the run's name; only minippo's runs keep checkpoints to resume."""
     if name.startswith("sb3-"):
         return sb3_run(config_dict, name, board)
     return minippo_run(config_dict, name, board, resume)
 
 
-# the sweep
-
-
 @dataclass
 class PeerRun(Run):
-    """A run of either library; its command is this runner's, for that one run."""
+    """A run of either library; its command is this runner's for that one run."""
 
     def command(self, out_dir) -> str:
         labels, config = self.labels, self.config
@@ -250,18 +200,15 @@ class PeerRun(Run):
 def sweep_runs(tasks, seeds, steps, libraries=LIBRARIES) -> list[PeerRun]:
     """Task by task, seed by seed, the libraries side by side (a campaign stopped halfway compares like with like)."""
     runs = []
-    for env_id in tasks:
-        for seed in seeds:
-            for library in libraries:
-                config = Config(env_id=env_id, total_steps=steps, seed=seed)
-                labels = {"library": library, "task": env_id, "seed": seed}
-                runs.append(PeerRun(f"{library}-{env_id}-seed{seed}", config, labels))
+    for env_id, seed, library in itertools.product(tasks, seeds, libraries):
+        config, labels = Config(env_id=env_id, total_steps=steps, seed=seed), {"library": library, "task": env_id}
+        runs.append(PeerRun(f"{library}-{env_id}-seed{seed}", config, labels | {"seed": seed}))
     return runs
 
 
 class PeerSweep(Sweep):
-    """minippo sweep's engine with ``peer_run`` as its task, and each finished run also recorded in peers.csv (the
-    row needs the task's evaluation and library version, which the engine's own sweep row does not carry)."""
+    """The engine with ``peer_run`` as its task, each finished run also recorded in peers.csv (with the evaluation and
+    the version, which the engine's sweep.csv lacks)."""
 
     task = staticmethod(peer_run)
 
@@ -290,24 +237,10 @@ def code_commit() -> str:
     return common.git_commit(("minippo", "benchmarks/peers.py"))
 
 
-def check_tasks(tasks) -> None:
-    import gymnasium as gym
-
-    for env_id in tasks:
-        if env_id not in gym.registry:
-            common.fail(f"unknown task '{env_id}'")
-        env = gym.make(env_id, disable_env_checker=True)
-        continuous = isinstance(env.action_space, gym.spaces.Box)
-        env.close()
-        if not continuous:
-            common.fail(f"{env_id} has discrete actions; this comparison is set up for continuous control")
-
-
 def evaluate_record(runs_csv, runs_root, record_csv, tasks=TASKS) -> int:
-    """minippo's side of the comparison from runs another record made with the same command (the seven tasks'
-    campaign): each run of ``tasks`` in ``runs_csv`` gets minippo's deterministic evaluation of its final policy
-    (``runs_root/<task>-seed<S>/policy.npz``, as ``minippo eval RUN --episodes 10 --seed 0``) and one row in
-    ``record_csv`` with the run's own command and commit. Returns how many rows were added."""
+    """minippo's side from another record's runs of the same command (the seven tasks'): each run of ``tasks`` in
+    ``runs_csv`` not yet in ``record_csv`` gets the evaluation of its ``runs_root/<task>-seed<S>/policy.npz`` and a
+    row with its own command and commit. Returns how many rows were added."""
     from minippo.evaluate import evaluate
 
     done = {(row["task"], row["seed"]) for row in read_rows(record_csv)}
@@ -319,22 +252,22 @@ def evaluate_record(runs_csv, runs_root, record_csv, tasks=TASKS) -> int:
         if not (folder / "policy.npz").exists():
             common.fail(f"no policy.npz in {folder}: the final policies stay on the machine that trained them")
         returns = evaluate(folder, EVAL_EPISODES, EVAL_SEED)
-        row = {"library": "minippo", "version": minippo_version(), "task": run["env"], **run}
+        row = {"library": "minippo", "version": version("minippo"), "task": run["env"], **run}
         row["eval_mean"] = round(statistics.fmean(returns), 2)
         append_row(record_csv, FIELDS, row)
         added += 1
     return added
 
 
+@common.one_line_errors
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--tasks", nargs="+", default=TASKS, metavar="TASK", help="Gymnasium ids (continuous actions)")
-    parser.add_argument("--seeds", nargs="+", type=int, default=SEEDS)
-    parser.add_argument("--steps", type=int, default=STEPS)
+    parser.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3, 4, 5])
+    parser.add_argument("--steps", type=int, default=1_000_000)
     parser.add_argument("--libraries", nargs="+", default=LIBRARIES, choices=LIBRARIES)
-    parser.add_argument("--csv", default=str(CSV_PATH), help="where to append the records")
+    parser.add_argument("--csv", default=str(common.RESULTS / "peers.csv"), help="where to append the records")
     parser.add_argument("--runs", default=str(RUN_ROOT), help="the folder of run folders")
-    parser.add_argument("--list", action="store_true", help="show what is recorded and what is left, then stop")
     parser.add_argument("--evaluate", metavar="RUNS_CSV", help="record minippo's side from these runs (in --runs)")
     common.add_sweep_options(parser)
     args = parser.parse_args(argv)
@@ -348,16 +281,19 @@ def main(argv=None) -> int:
     runs = sweep_runs(args.tasks, args.seeds, args.steps, [name for name in LIBRARIES if name in args.libraries])
     if args.list:
         return common.show_list(runs, args.csv, FIELDS)
-    check_tasks(args.tasks)
+    import gymnasium as gym
+
+    for env_id in args.tasks:
+        if env_id not in gym.registry:
+            common.fail(f"unknown task '{env_id}'")
+        with gym.make(env_id, disable_env_checker=True) as env:
+            if not isinstance(env.action_space, gym.spaces.Box):
+                common.fail(f"{env_id} has discrete actions; this comparison is set up for continuous control")
     if "sb3" in args.libraries and importlib.util.find_spec("stable_baselines3") is None:
         install = 'pip install torch==2.13.0 (the CPU wheel) and then pip install -e ".[bench]"'
         common.fail(f"Stable-Baselines3 is not installed: {install}")
-    try:  # Ray pickles the task; on a cluster this module is only on this machine, so it goes by value
-        from ray import cloudpickle
-
-        cloudpickle.register_pickle_by_value(sys.modules[__name__])
-    except ImportError:  # the engine says that Ray is missing
-        pass
+    if importlib.util.find_spec("ray"):  # Ray pickles the task by value: on a cluster this module is only here
+        importlib.import_module("ray.cloudpickle").register_pickle_by_value(sys.modules[__name__])
     engine = functools.partial(PeerSweep, record_csv=args.csv)
     return common.run_sweep(runs, args.runs, args.csv, FIELDS, args, engine=engine)
 

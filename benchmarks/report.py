@@ -2,9 +2,8 @@
 
     python -m benchmarks.report             # score the records, then write summary.md, the figures and the README block
 
-summary.md is benchmarks/summary_template.md, paragraphs written once by a person that say what each table holds and
-how it was made (never what its numbers are), with each ``<!-- table:NAME -->`` replaced by the table NAME that
-benchmarks/scoring.py computes.
+summary.md is benchmarks/summary_template.md (a person's paragraphs on what each table holds and how it was made)
+with each ``<!-- table:NAME -->`` replaced by the table NAME that benchmarks/scoring.py computes.
 """
 
 from __future__ import annotations
@@ -13,8 +12,11 @@ import re
 import sys
 from pathlib import Path
 
+import numpy as np
+from matplotlib.figure import Figure
+
 from benchmarks import scoring
-from benchmarks.common import RESULTS, ROOT, RUNS, fail
+from benchmarks.common import RESULTS, ROOT, RUNS, BenchmarkError, one_line_errors
 from minippo.plotting import INK, ORANGE, SAGE, draw_seed_band, read_progress, seed_curves
 from minippo.records import read_rows
 
@@ -39,15 +41,19 @@ COLUMNS |= {"table1_1m_more_seeds": SCALE, "same_math": SAME}
 TEMPLATE = Path(__file__).with_name("summary_template.md")
 
 
-def figure_seven_tasks(rows: list[dict], out: Path, runs_root=RUNS / "seven_tasks") -> None:
-    import matplotlib.pyplot as plt
+def band(ax, folders, colour: str, library: str, **options) -> None:
+    """The seed band of the runs in ``folders`` on ``ax``, labelled with the library and the number of seeds."""
+    curves = seed_curves([read_progress(folder) for folder in folders])
+    if curves is not None:
+        draw_seed_band(ax, *curves, colour, f"{library}, {len(folders)} seeds", **options)
 
-    fig, axes = plt.subplots(2, 4, figsize=(13, 5.6), dpi=100)
+
+def figure_seven_tasks(rows: list[dict], out: Path, runs_root=RUNS / "seven_tasks") -> None:
+    fig = Figure(figsize=(13, 5.6), dpi=100)  # no pyplot: nothing to show, nothing to close
+    axes = fig.subplots(2, 4)
     for ax, task in zip(axes.flat, scoring.SEVEN_TASKS):
-        runs = [read_progress(Path(runs_root) / f"{task}-seed{r['seed']}") for r in rows if r["env"] == task]
-        curves = seed_curves(runs)
-        if curves is not None:
-            draw_seed_band(ax, *curves, ORANGE, f"minippo, {len(runs)} seeds", alpha=0.25)
+        folders = [Path(runs_root) / f"{task}-seed{r['seed']}" for r in rows if r["env"] == task]
+        band(ax, folders, ORANGE, "minippo", alpha=0.25)
         ax.axhline(scoring.PAPER_FIGURE3[task][0], color=INK, ls="--", lw=1, label="paper, Fig. 3 (read off)")
         ax.set_title(task, fontsize=10)
     axes.flat[-1].axis("off")
@@ -57,34 +63,22 @@ def figure_seven_tasks(rows: list[dict], out: Path, runs_root=RUNS / "seven_task
 
 def figure_peers(rows: list[dict], out: Path, runs_root=RUNS / "peers", minippo_root=RUNS / "seven_tasks") -> None:
     """SB3's curves from the side-by-side runs, minippo's from the seven-task runs its side reads."""
-    import matplotlib.pyplot as plt
-
     tasks = list(dict.fromkeys(row["task"] for row in rows))
-    fig, axes = plt.subplots(1, len(tasks), figsize=(4.2 * len(tasks), 3.4), dpi=100, squeeze=False)
+    fig = Figure(figsize=(4.2 * len(tasks), 3.4), dpi=100)
+    axes = fig.subplots(1, len(tasks), squeeze=False)
     for ax, task in zip(axes[0], tasks):
-        for library, colour in (("minippo", ORANGE), ("sb3", SAGE)):
+        for library, colour, prefix in (("minippo", ORANGE, f"{minippo_root}/"), ("sb3", SAGE, f"{runs_root}/sb3-")):
             seeds = [r["seed"] for r in rows if r["task"] == task and r["library"] == library]
-            folders = [
-                Path(minippo_root) / f"{task}-seed{seed}"
-                if library == "minippo"
-                else Path(runs_root) / f"sb3-{task}-seed{seed}"
-                for seed in seeds
-            ]
-            runs = [read_progress(folder) for folder in folders]
-            curves = seed_curves(runs)
-            if curves is not None:
-                draw_seed_band(ax, *curves, colour, f"{library}, {len(runs)} seeds")
+            band(ax, [Path(f"{prefix}{task}-seed{seed}") for seed in seeds], colour, library)
         ax.set_title(task, fontsize=10)
         ax.legend(frameon=False, fontsize=8, loc="upper left")
     save(fig, out)
 
 
 def figure_table1(table: list[dict], out: Path) -> None:
-    import matplotlib.pyplot as plt
-    import numpy as np
-
     y = np.arange(len(table))
-    fig, ax = plt.subplots(figsize=(7.5, 4.5), dpi=100)
+    fig = Figure(figsize=(7.5, 4.5), dpi=100)
+    ax = fig.subplots()
     ax.barh(y - 0.2, [float(row["score"]) for row in table], 0.4, color=ORANGE, label="minippo")
     ax.barh(y + 0.2, [float(row["paper_score"]) for row in table], 0.4, color=INK, alpha=0.6, label="paper, Table 1")
     ax.set_yticks(y, [row["setting"] for row in table], fontsize=8)
@@ -96,13 +90,10 @@ def figure_table1(table: list[dict], out: Path) -> None:
 
 
 def save(fig, out: Path) -> None:
-    import matplotlib.pyplot as plt
-
     for ax in fig.axes:
         ax.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(out)
-    plt.close(fig)
 
 
 def summary_text(tables: dict[str, list[dict]]) -> str:
@@ -116,25 +107,20 @@ def summary_text(tables: dict[str, list[dict]]) -> str:
 def readme_blocks(tables: dict[str, list[dict]], speed: list[dict]) -> dict[str, str]:
     seven = [row for row in tables["seven_tasks"] if row["record"] == "seven_tasks_runs.csv"]
     columns = {k: SEVEN[k] for k in ("Task", "minippo, mean ± sd", "paper (Fig. 3, ≈)", "CleanRL (v4)")}
-    return {
-        "mujoco": scoring.markdown(seven, columns),
-        "speed": scoring.markdown(speed, {k: SPEED[k] for k in list(SPEED)[:4]}),
-    }
+    return {"mujoco": scoring.markdown(seven, columns), "speed": scoring.markdown(speed, dict(list(SPEED.items())[:4]))}
 
 
 def fill_readme(text: str, blocks: dict[str, str]) -> str:
     for name, block in blocks.items():
         pattern = re.compile(rf"(<!-- summary:{name} -->\n).*?(\n<!-- /summary:{name} -->)", re.S)
         if not pattern.search(text):
-            raise ValueError(f"the README has no <!-- summary:{name} --> block")
+            raise BenchmarkError(f"the README has no <!-- summary:{name} --> block")
         text = pattern.sub(lambda match, block=block: match.group(1) + block + match.group(2), text)
     return text
 
 
+@one_line_errors
 def main(argv=None) -> int:
-    import matplotlib
-
-    matplotlib.use("Agg")
     tables = scoring.score_all()
     (RESULTS / "summary.md").write_text(summary_text(tables))
     figure_seven_tasks(read_rows(RESULTS / "seven_tasks_runs.csv"), RESULTS / "mujoco_curves.png")
@@ -142,10 +128,7 @@ def main(argv=None) -> int:
     figure_peers(peer_rows + read_rows(RESULTS / "peers_minippo.csv"), RESULTS / "peers_curves.png")
     figure_table1(tables["table1_1m"], RESULTS / "table1_1m.png")
     readme = ROOT / "README.md"
-    try:
-        readme.write_text(fill_readme(readme.read_text(), readme_blocks(tables, read_rows(RESULTS / "speed.csv"))))
-    except ValueError as error:
-        fail(str(error))
+    readme.write_text(fill_readme(readme.read_text(), readme_blocks(tables, read_rows(RESULTS / "speed.csv"))))
     print("wrote benchmarks/results/summary.md, its figures and the README's result tables", file=sys.stderr)
     return 0
 

@@ -1,9 +1,5 @@
-"""Records in, tables out: every number that summary.md, the README and chapter 11 show is computed here from the
-CSV records in benchmarks/results/, and written as a CSV table under benchmarks/results/tables/ (and as Markdown).
-
-    python -m benchmarks.scoring          # rewrite every table from the records
-
-No sentences: the paragraphs around the tables are written once, by a person (benchmarks/report.py).
+"""Records in, tables out: every number that summary.md, the README and chapter 11 show, computed from the records
+in benchmarks/results/ and written under benchmarks/results/tables/ (by ``python -m benchmarks.report``). No sentences.
 """
 
 from __future__ import annotations
@@ -13,7 +9,7 @@ import statistics
 from collections import defaultdict
 from pathlib import Path
 
-from benchmarks.common import RESULTS, BenchmarkError, relative, write_rows
+from benchmarks.common import RESULTS, BenchmarkError, write_rows
 from minippo.records import read_rows
 
 TABLES = RESULTS / "tables"
@@ -26,26 +22,19 @@ CLEANRL = {task: (int(r["cleanrl_mean"]), int(r["cleanrl_sd"])) for task, r in P
 TABLE1_PAPER = {row["setting"]: float(row["paper_score"]) for row in read_rows(RESULTS / "published_table1.csv")}
 RANDOM_EPISODES, RANDOM_SEED = 100, 0
 STEPS_1M = 999_424  # 488 updates of 2048 steps
+DETAILS = ["grad_norm_clipping", "clip_value_loss", "scale_rewards"]  # the three the paper does not describe
 
 
 def welch_interval(first: list[float], second: list[float], level: float = 0.95) -> dict:
-    """Welch's t interval for mean(first) − mean(second), variances not assumed equal, at the Welch–Satterthwaite
-    degrees of freedom; ``standing`` is ahead / behind when the interval excludes 0, else level."""
+    """Welch's t interval for mean(first) − mean(second) (SciPy's Welch test: variances not assumed equal, the
+    Welch–Satterthwaite degrees of freedom); ``standing`` is ahead / behind when the interval excludes 0, else level."""
     from scipy import stats
 
     if len(first) < 2 or len(second) < 2:
         raise ValueError("Welch's interval needs at least two values in each sample")
-    diff = statistics.fmean(first) - statistics.fmean(second)
-    part1, part2 = statistics.variance(first) / len(first), statistics.variance(second) / len(second)
-    se = math.sqrt(part1 + part2)
-    if se == 0.0:
-        low = high = diff
-    else:
-        df = (part1 + part2) ** 2 / (part1**2 / (len(first) - 1) + part2**2 / (len(second) - 1))
-        half = float(stats.t.ppf(0.5 + level / 2, df)) * se
-        low, high = diff - half, diff + half
+    low, high = map(float, stats.ttest_ind(first, second, equal_var=False).confidence_interval(level))
     standing = "ahead" if low > 0 else "behind" if high < 0 else "level"
-    return {"diff": diff, "se": se, "low": low, "high": high, "standing": standing}
+    return {"diff": statistics.fmean(first) - statistics.fmean(second), "low": low, "high": high, "standing": standing}
 
 
 def random_returns(rows: list[dict]) -> dict[str, float]:
@@ -55,13 +44,10 @@ def random_returns(rows: list[dict]) -> dict[str, float]:
 
 
 def normalized_scores(runs: list[dict], random_return: dict[str, float]) -> dict[str, dict]:
-    """Table 1's scoring. Per task, the random policy's return is 0 and the best run of any setting on that task is
-    1; a setting's score is the mean of its runs' normalised returns. ``se``: the seeds' standard error, each task's
-    sample variance pooled as for a mean over K tasks, √(Σ_k s_k²/n_k) / K (None when a task has one seed).
-    Returns {setting: {"score", "se", "runs", "tasks", "per_task"}}."""
-    best: dict[str, float] = {}
-    for run in runs:
-        best[run["env"]] = max(best.get(run["env"], -math.inf), float(run["return_mean"]))
+    """Table 1's scoring: per task the random policy's return is 0 and the best run of any setting is 1; a setting's
+    score is the mean of its runs' normalised returns, ``se`` √(Σ_k s_k²/n_k) / K over its K tasks (None when a task
+    has one seed). Returns {setting: {"score", "se", "runs", "tasks", "per_task"}}."""
+    best = {r["env"]: max(float(o["return_mean"]) for o in runs if o["env"] == r["env"]) for r in runs}
     per_task = defaultdict(lambda: defaultdict(list))
     for run in runs:
         env_id = run["env"]
@@ -77,19 +63,14 @@ def normalized_scores(runs: list[dict], random_return: dict[str, float]) -> dict
         se = None
         if all(len(task) > 1 for task in tasks.values()):
             se = math.sqrt(sum(statistics.variance(task) / len(task) for task in tasks.values())) / len(tasks)
-        scores[setting] = {
-            "score": statistics.fmean(values),
-            "se": se,
-            "runs": len(values),
-            "tasks": len(tasks),
-            "per_task": {env_id: statistics.fmean(task) for env_id, task in tasks.items()},
-        }
+        scores[setting] = {"score": statistics.fmean(values), "se": se, "runs": len(values), "tasks": len(tasks)}
+        scores[setting]["per_task"] = {env_id: statistics.fmean(task) for env_id, task in tasks.items()}
     return scores
 
 
 def complete(runs: list[dict], tasks, seeds, by: str) -> list[str]:
-    """The settings (``by="setting"``) that have a run for every task and seed, or the tasks (``by="env"``) on which
-    every recorded setting has one for every seed: what can be scored while a campaign is still running."""
+    """The settings (``by="setting"``) with a run for every task and seed, or the tasks (``by="env"``) where every
+    setting has one for every seed: what can be scored while a campaign runs."""
     done = {(run["setting"], run["env"], int(run["seed"])) for run in runs}
     settings = list(dict.fromkeys(run["setting"] for run in runs))
     if by == "setting":
@@ -98,11 +79,10 @@ def complete(runs: list[dict], tasks, seeds, by: str) -> list[str]:
 
 
 def table1(runs: list[dict], randoms: list[dict], tasks, seeds, steps: int) -> list[dict]:
-    """Table 1 from a runs record: the settings with every run of ``tasks`` × ``seeds`` at ``steps`` (or, while no
-    setting has them all, the complete tasks), scored, in the paper's row order."""
+    """Table 1 from a runs record: the settings with every run of ``tasks`` × ``seeds`` at ``steps`` (while none has,
+    the complete tasks), scored, in the paper's order."""
     runs = [r for r in runs if r["env"] in tasks and int(r["seed"]) in seeds and int(r["steps"]) == steps]
-    settings = complete(runs, tasks, seeds, "setting")
-    if settings:
+    if settings := complete(runs, tasks, seeds, "setting"):
         runs = [run for run in runs if run["setting"] in settings]
     else:
         tasks = complete(runs, tasks, seeds, "env")
@@ -122,9 +102,8 @@ def table1(runs: list[dict], randoms: list[dict], tasks, seeds, steps: int) -> l
 
 
 def on_one_scale(records: dict[str, list[dict]], randoms: list[dict]) -> list[dict]:
-    """Several runs records of Table 1's settings scored on one scale: per task the best run of any of them is 1,
-    over the tasks every record covers completely at its own seeds. One row per setting and record ([] while a
-    record is empty)."""
+    """Several runs records of Table 1's settings on one scale (per task the best run of any is 1), over the tasks
+    each record covers completely. One row per setting and record ([] while a record is empty)."""
     if not all(records.values()):
         return []
     tasks = set(SEVEN_TASKS)
@@ -146,8 +125,8 @@ def on_one_scale(records: dict[str, list[dict]], randoms: list[dict]) -> list[di
 
 
 def seven_tasks(runs: list[dict], record: str) -> list[dict]:
-    """Per task (the paper's seven, in order): the seeds' final returns, mean ± sample sd, the paper's Figure 3 range
-    and CleanRL's mean ± sd, and the mean minutes a run took. ``runs``: rows with env, seed, return_mean, wall_s."""
+    """Per task, in the paper's order: the seeds' final returns, their mean ± sd, the paper's Figure 3 range, CleanRL's
+    mean ± sd, and a run's mean minutes."""
     table = []
     for env_id in SEVEN_TASKS:
         rows = sorted((r for r in runs if r["env"] == env_id), key=lambda r: int(r["seed"]))
@@ -166,14 +145,12 @@ def seven_tasks(runs: list[dict], record: str) -> list[dict]:
 
 
 def minutes(runs: list[dict]) -> float:
-    """The mean minutes of a run, by the runs' own clocks."""
     return round(statistics.fmean(float(run["wall_s"]) for run in runs) / 60, 1)
 
 
 def peers(rows: list[dict]) -> list[dict]:
-    """minippo against Stable-Baselines3 per task and score (train: the last 100 training episodes; eval: 10
-    deterministic episodes): each library's mean ± standard error over seeds, and Welch's 95% interval of the
-    difference minippo − SB3 (the tasks where both libraries have two seeds at least)."""
+    """minippo against SB3 per task and score (train, eval): each library's mean ± standard error over seeds and
+    Welch's 95% interval of minippo − SB3, on the tasks where both have two seeds at least."""
     table = []
     for task in dict.fromkeys(row["task"] for row in rows):
         mine = sorted((r for r in rows if r["task"] == task and r["library"] == "minippo"), key=lambda r: r["seed"])
@@ -194,12 +171,9 @@ def peers(rows: list[dict]) -> list[dict]:
     return table
 
 
-DETAILS = ["grad_norm_clipping", "clip_value_loss", "scale_rewards"]
-
-
 def one_detail(records: dict[str, list[dict]]) -> list[dict]:
-    """No clipping (L^CPI) with the three details all on, each one off alone, and all off: per task the mean final
-    return over seeds of each record (``records``: {column: runs}), on the tasks the one-off records ran."""
+    """No clipping (L^CPI) with the three details on, each one off, all off: per task the mean final return of each
+    record (``records``: {column: runs}), on the tasks the one-off records ran."""
     none = "No clipping or penalty"
     tasks = [t for t in SEVEN_TASKS if any(r["env"] == t for d in DETAILS for r in records.get(f"{d} off", []))]
     table = []
@@ -214,17 +188,17 @@ def one_detail(records: dict[str, list[dict]]) -> list[dict]:
 
 
 def same_math(rows: list[dict]) -> list[dict]:
-    """Per comparison of two commits: the largest relative difference at update 1, and the first update where the
-    two runs part by more than 1% (empty when they never do)."""
-    groups = defaultdict(list)
+    """Per comparison of two commits: the largest relative difference at update 1, and the first update where they
+    part by more than 1% (empty if never)."""
+    groups, names = defaultdict(list), ("env", "seed", "dtype", "earlier_commit", "commit")
     for row in rows:
-        groups[(row["env"], row["seed"], row["dtype"], row["earlier_commit"], row["commit"])].append(row)
+        groups[tuple(row[k] for k in names)].append(row)
     table = []
-    for (env_id, seed, dtype, earlier, commit), runs in groups.items():
+    for key, runs in groups.items():
         runs.sort(key=lambda row: int(row["update"]))
         parted = [int(r["update"]) for r in runs if float(r["max_relative_difference"]) > 0.01]
-        row = {"env": env_id, "seed": seed, "dtype": dtype, "earlier_commit": earlier, "commit": commit}
-        row |= {"updates": len(runs), "difference_at_update_1": runs[0]["max_relative_difference"]}
+        first = runs[0]["max_relative_difference"]
+        row = dict(zip(names, key)) | {"updates": len(runs), "difference_at_update_1": first}
         table.append(row | {"parted_at_update": parted[0] if parted else "", "command": runs[0]["command"]})
     return table
 
@@ -238,43 +212,28 @@ def markdown(rows: list[dict], columns: dict[str, str]) -> str:
 
 def score_all(results=RESULTS, folder=TABLES) -> dict[str, list[dict]]:
     """Every table, from the records in ``results``, written into ``folder``; returns them by name."""
-    results = Path(results)
 
     def record(name):
-        return read_rows(results / name)
+        return read_rows(Path(results) / name)
 
-    randoms = record("random.csv")
-    default_1m = record("table1_1m_runs.csv")
-    eps02 = [r for r in default_1m if r["setting"] == "Clipping, ε = 0.2"]
+    randoms, default, paper = record("random.csv"), record("table1_1m_runs.csv"), record("table1_1m_paperimpl_runs.csv")
+    # the book's seven tasks (5 seeds at one commit), then the older records, kept for benchmarks/README
+    seven = {name: record(name) for name in ("seven_tasks_runs.csv", "mujoco.csv")}
+    seven["table1_1m_runs.csv"] = [r for r in default if r["setting"] == "Clipping, ε = 0.2"]
+    details = {"all on": default, **{f"{d} off": record(f"cpi_without_{d}_runs.csv") for d in DETAILS}}
+    two = {"defaults": default, "as the paper describes it": paper}
+    more_seeds = {"seeds 1-3": default, "seeds 4-6": record("table1_1m_more_seeds_runs.csv")}
     tables = {
-        # the book's: 5 seeds at one commit; then the older records, kept for benchmarks/README
-        "seven_tasks": seven_tasks(record("seven_tasks_runs.csv"), "seven_tasks_runs.csv")
-        + seven_tasks(record("mujoco.csv"), "mujoco.csv")
-        + seven_tasks(eps02, "table1_1m_runs.csv"),
-        # Stable-Baselines3's runs beside minippo's side from the same seven-task runs (peers.py --evaluate)
+        "seven_tasks": [row for name, runs in seven.items() for row in seven_tasks(runs, name)],
+        # SB3's runs beside minippo's side from the same seven-task runs (peers.py --evaluate)
         "peers": peers([row for row in record("peers.csv") if row["library"] == "sb3"] + record("peers_minippo.csv")),
-        "table1_1m": table1(default_1m, randoms, SEVEN_TASKS, [1, 2, 3], STEPS_1M),
-        "table1_1m_two_implementations": on_one_scale(
-            {"defaults": default_1m, "as the paper describes it": record("table1_1m_paperimpl_runs.csv")}, randoms
-        ),
-        "table1_1m_more_seeds": on_one_scale(
-            {"seeds 1-3": default_1m, "seeds 4-6": record("table1_1m_more_seeds_runs.csv")}, randoms
-        ),
-        "cpi_one_detail": one_detail(
-            {
-                "all on": default_1m,
-                **{f"{d} off": record(f"cpi_without_{d}_runs.csv") for d in DETAILS},
-                "all off": record("table1_1m_paperimpl_runs.csv"),
-            }
-        ),
+        "table1_1m": table1(default, randoms, SEVEN_TASKS, [1, 2, 3], STEPS_1M),
+        "table1_1m_two_implementations": on_one_scale(two, randoms),
+        "table1_1m_more_seeds": on_one_scale(more_seeds, randoms),
+        "cpi_one_detail": one_detail(details | {"all off": paper}),
         "same_math": same_math(record("same_math.csv")),
     }
     for name, rows in tables.items():
         if rows:
             write_rows(Path(folder) / f"{name}.csv", rows)
     return tables
-
-
-if __name__ == "__main__":
-    for name, rows in score_all().items():
-        print(f"{relative(TABLES / (name + '.csv'))}: {len(rows)} rows")

@@ -2,7 +2,6 @@
 
     python -m benchmarks.seven_tasks                       # every (task, seed) not yet recorded, Hopper first
     python -m benchmarks.seven_tasks --envs Hopper-v5 --seeds 1 2 3
-    python -m benchmarks.seven_tasks --address HOST:PORT   # on a running Ray cluster
     python -m benchmarks.seven_tasks --list                # what is recorded, what is left
 
 Each run is ``minippo train ENV --steps 1000000 --seed S``, recorded in results/mujoco.csv; recorded runs are skipped.
@@ -11,15 +10,12 @@ Each run is ``minippo train ENV --steps 1000000 --seed S``, recorded in results/
 from __future__ import annotations
 
 import argparse
+import itertools
 
 from benchmarks import common
 from benchmarks.scoring import SEVEN_TASKS as TASKS
 
-SEEDS = [1, 2, 3]
-STEPS = 1_000_000
 FIELDS = ["env", "seed", "steps", "return_mean", "wall_s", "steps_per_s", "commit", "command"]
-CSV_PATH = common.RESULTS / "mujoco.csv"
-RUN_ROOT = common.RUNS / "mujoco"
 
 
 def sweep_runs(envs, seeds, steps) -> list:
@@ -27,26 +23,20 @@ def sweep_runs(envs, seeds, steps) -> list:
     from minippo.ppo import Config
     from minippo.sweep import Run
 
-    return [
-        Run(f"{env_id}-seed{seed}", Config(env_id=env_id, total_steps=steps, seed=seed), {"env": env_id, "seed": seed})
-        for env_id in envs
-        for seed in seeds
-    ]
+    runs = itertools.product(envs, seeds)
+    return [Run(f"{e}-seed{s}", Config(env_id=e, total_steps=steps, seed=s), {"env": e, "seed": s}) for e, s in runs]
 
 
+@common.one_line_errors
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--envs", nargs="+", default=TASKS, metavar="ENV")
-    parser.add_argument("--seeds", nargs="+", type=int, default=SEEDS)
-    parser.add_argument("--steps", type=int, default=STEPS)
-    parser.add_argument("--csv", default=str(CSV_PATH), help="where to append the records")
-    parser.add_argument("--runs", default=str(RUN_ROOT), help="the folder of run folders")
-    parser.add_argument("--list", action="store_true", help="show what is recorded and what is left, then stop")
+    parser.add_argument("--envs", nargs="+", default=TASKS, choices=TASKS, metavar="ENV", help="of the seven tasks")
+    parser.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3])
+    parser.add_argument("--steps", type=int, default=1_000_000)
+    parser.add_argument("--csv", default=str(common.RESULTS / "mujoco.csv"), help="where to append the records")
+    parser.add_argument("--runs", default=str(common.RUNS / "mujoco"), help="the folder of run folders")
     common.add_sweep_options(parser)
     args = parser.parse_args(argv)
-    unknown = [env_id for env_id in args.envs if env_id not in TASKS]
-    if unknown:
-        common.fail(f"unknown task {', '.join(unknown)}; the seven are {', '.join(TASKS)}")
     common.check_steps(args.steps)
     runs = sweep_runs(args.envs, args.seeds, args.steps)
     return common.run_sweep(runs, args.runs, args.csv, FIELDS, args)

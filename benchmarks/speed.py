@@ -1,14 +1,13 @@
-"""The speed race on one machine, in one process: raw environment stepping, minippo, and Stable-Baselines3 PPO; or,
-with --sweep, what ``minippo sweep`` saves: a small grid trained one run after the other, then on the sweep engine.
+"""The speed race in one process: raw environment stepping, minippo and Stable-Baselines3 PPO; or, with --sweep,
+a small grid trained one run after the other, then on minippo sweep's engine.
 
     python -m benchmarks.speed                            # Hopper-v5, 5 interleaved rounds -> results/speed.csv
     python -m benchmarks.speed --env MinAtar/Breakout-v1  # the paper's Atari settings -> results/speed_minatar.csv
     python -m benchmarks.speed --sweep --steps 204800     # 4 Hopper runs, alone and on 2 workers -> sweep_speed.csv
 
-The race interleaves its rounds (raw random stepping, ``--updates`` updates of minippo's ``Trainer``, SB3 PPO with the
-settings ``peers.sb3_model`` translates, one torch thread) so that a change in the machine's load hits all three, and
-reports the medians. The sweep mode checks that every run's progress.csv is the same on both sides apart from the
-clock columns. Run either while no training is running: the 1-minute load average goes in the CSV.
+The race interleaves its rounds (20,000 random steps, ``--updates`` updates of minippo's ``Trainer`` and of SB3 PPO
+with the peers' settings) so that a change in the machine's load hits all three, and reports the medians. --sweep
+checks that every progress.csv is the same on both sides but for the clock. The load average goes in the CSV.
 """
 
 from __future__ import annotations
@@ -29,53 +28,23 @@ FIELDS = "env contender steps_per_s rounds steps_per_round vs_raw vs_sb3 version
 FIELDS = [*FIELDS.split(), "commit", "command"]
 SWEEP_FIELDS = "env grid runs steps workers cpus sequential_s sweep_s speedup sequential_train_s sweep_train_s"
 SWEEP_FIELDS = [*SWEEP_FIELDS.split(), "same_progress", "load_before", "load_after", "commit", "command"]
-
-
-def minatar(env_id: str) -> bool:
-    return env_id.startswith("MinAtar/")
-
-
-def race_config(env_id: str, seed: int):
-    """The paper's MuJoCo settings (Config's defaults), or its Atari settings on a MinAtar game."""
-    from minippo.ppo import Config
-    from minippo.presets import ATARI
-
-    if minatar(env_id):
-        return Config(env_id=env_id, seed=seed, total_steps=10_000_000, **ATARI).validate()
-    return Config(env_id=env_id, seed=seed, total_steps=1_000_000)
+RAW_STEPS = 20_000  # random steps a round
 
 
 def raw_stepping(env_id: str, steps: int, seed: int) -> float:
     """Steps per second of random actions in the bare environment."""
     import gymnasium as gym
 
-    env = gym.make(env_id)
-    env.action_space.seed(seed)
-    env.reset(seed=seed)
-    actions = [env.action_space.sample() for _ in range(steps)]  # sampled before the clock starts
-    started = time.perf_counter()
-    for action in actions:
-        _, _, terminated, truncated, _ = env.step(action)
-        if terminated or truncated:
-            env.reset()
-    elapsed = time.perf_counter() - started
-    env.close()
-    return steps / elapsed
-
-
-class MinippoContender:
-    def __init__(self, env_id: str, seed: int):
-        from minippo.ppo import Trainer
-
-        self.trainer = Trainer(race_config(env_id, seed))
-        self.trainer.run_update()  # warm-up: first touches of memory, caches, lazy imports
-
-    def measure(self, updates: int) -> tuple[float, int]:
-        steps_before, started = self.trainer.rollout.steps, time.perf_counter()
-        for _ in range(updates):
-            self.trainer.run_update()
-        steps = self.trainer.rollout.steps - steps_before
-        return steps / (time.perf_counter() - started), steps
+    with gym.make(env_id) as env:
+        env.action_space.seed(seed)
+        env.reset(seed=seed)
+        actions = [env.action_space.sample() for _ in range(steps)]  # sampled before the clock starts
+        started = time.perf_counter()
+        for action in actions:
+            _, _, terminated, truncated, _ = env.step(action)
+            if terminated or truncated:
+                env.reset()
+        return steps / (time.perf_counter() - started)
 
 
 def sb3_minatar_model(config):
@@ -110,42 +79,14 @@ def sb3_minatar_model(config):
     return PPO("MlpPolicy", env, policy_kwargs=trunk, device="cpu", seed=config.seed, verbose=0, **settings)
 
 
-class StableBaselinesContender:
-    def __init__(self, env_id: str, seed: int):
-        from benchmarks.peers import sb3_model
-
-        config = race_config(env_id, seed)
-        self.model = sb3_minatar_model(config) if minatar(env_id) else sb3_model(config)[0]  # the peers' settings
-        self.batch = self.model.n_steps * self.model.n_envs
-        self.model.learn(total_timesteps=self.batch)  # warm-up: one rollout and one update
-
-    def measure(self, updates: int) -> tuple[float, int]:
-        steps_before, started = self.model.num_timesteps, time.perf_counter()
-        self.model.learn(total_timesteps=updates * self.batch, reset_num_timesteps=False)
-        steps = self.model.num_timesteps - steps_before
-        return steps / (time.perf_counter() - started), steps
-
-
-def sb3_version() -> str | None:
-    try:
-        import stable_baselines3
-        import torch
-    except ImportError:
-        return None
-    return f"stable-baselines3 {stable_baselines3.__version__}, torch {torch.__version__}"
-
-
 def summarize(env_id: str, rounds: dict[str, list[float]], steps: dict[str, int], versions: dict[str, str]) -> list:
     """One row per contender: the median over rounds, and the ratios of the medians."""
     medians = {name: statistics.median(values) for name, values in rounds.items() if values}
     rows = []
     for name in ("raw", "minippo", "sb3"):
         median = medians.get(name)
-        row = {"env": env_id, "contender": name, "steps_per_s": round(median, 1) if median is not None else ""}
-        row |= {
-            "rounds": ";".join(f"{value:.1f}" for value in rounds.get(name, [])),
-            "steps_per_round": steps.get(name, ""),
-        }
+        row = {"env": env_id, "contender": name, "steps_per_s": "" if median is None else round(median, 1)}
+        row |= {"rounds": ";".join(f"{v:.1f}" for v in rounds.get(name, [])), "steps_per_round": steps.get(name, "")}
         for other in ("raw", "sb3"):
             row[f"vs_{other}"] = round(median / medians[other], 3) if median is not None and other in medians else ""
         rows.append({**row, "version": versions.get(name, "")})
@@ -153,27 +94,19 @@ def summarize(env_id: str, rounds: dict[str, list[float]], steps: dict[str, int]
 
 
 def sweep_race(args, argv) -> int:
-    """Each run's ``minippo train`` command in this process, one after the other, then ``minippo sweep`` with the same
-    runs (timed from the start of Ray to its stop); one row appended to the record."""
+    """Each run's ``minippo train`` in this process, one after the other, then ``minippo sweep`` of the same runs
+    (timed from Ray's start to its stop); one row appended to the record."""
     import shlex
     import tempfile
     from pathlib import Path
 
     from minippo import sweep
     from minippo.cli import main as minippo
-    from minippo.errors import MinippoError
     from minippo.records import append_row, read_rows
 
-    try:
-        runs = sweep.plan([args.env], sweep.parse_seeds(args.seeds), args.steps, sweep.parse_grid([args.grid]))
-    except MinippoError as error:
-        common.fail(str(error))
+    runs = sweep.plan([args.env], sweep.parse_seeds(args.seeds), args.steps, sweep.parse_grid([args.grid]))
     if args.workers < 1 or args.steps < 2048:
         common.fail("--workers must be at least 1 and --steps at least one horizon (2048)")
-
-    def progress(run_dir) -> list[dict]:  # without the clock columns
-        rows = read_rows(run_dir / "progress.csv")
-        return [{k: v for k, v in row.items() if k not in ("steps_per_s", "wall_s")} for row in rows]
 
     load_before, commit, seconds = os.getloadavg()[0], common.git_commit(), {}  # the code as it starts
     with tempfile.TemporaryDirectory(prefix="sweep-speed-") as scratch:
@@ -187,16 +120,19 @@ def sweep_race(args, argv) -> int:
         seconds["sweep"] = time.perf_counter() - started
         if failed:
             common.fail(f"{failed} runs of the sweep failed; see {swept / 'sweep.csv'}")
-        same = all(progress(alone / run.name) == progress(swept / run.name) for run in runs)
-        train = {
-            side: sum(float(read_rows(f / r.name / "progress.csv")[-1]["wall_s"]) for r in runs)
-            for side, f in (("sequential", alone), ("sweep", swept))
-        }
+        sides = {"sequential": alone, "sweep": swept}
+        progress = {side: [read_rows(f / run.name / "progress.csv") for run in runs] for side, f in sides.items()}
+    train = {side: sum(float(rows[-1]["wall_s"]) for rows in runs_rows) for side, runs_rows in progress.items()}
+
+    def unclocked(rows):
+        return [{k: v for k, v in row.items() if k not in ("steps_per_s", "wall_s")} for row in rows]
+
     steps = runs[0].config.num_updates * runs[0].config.batch_size
     row = {"env": args.env, "grid": args.grid, "runs": len(runs), "steps": steps, "workers": args.workers}
     row |= {"cpus": os.cpu_count(), **{f"{side}_s": round(value, 1) for side, value in seconds.items()}}
     row |= {"speedup": round(seconds["sequential"] / seconds["sweep"], 2)}
     row |= {"sequential_train_s": round(train["sequential"], 1), "sweep_train_s": round(train["sweep"], 1)}
+    same = all(unclocked(a) == unclocked(b) for a, b in zip(progress["sequential"], progress["sweep"]))
     row |= {"same_progress": "yes" if same else "no", "load_before": round(load_before, 2)}
     row |= {"load_after": round(os.getloadavg()[0], 2), "commit": commit, "command": common.invocation("speed", argv)}
     append_row(args.csv, SWEEP_FIELDS, row)
@@ -207,12 +143,12 @@ def sweep_race(args, argv) -> int:
     return 0 if same else 1
 
 
+@common.one_line_errors
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--env", default="Hopper-v5", help="a MuJoCo task, or a MinAtar game (MinAtar/<Game>-v1)")
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--updates", type=int, help="timed updates per round for each trainer (3; 5 on MinAtar)")
-    parser.add_argument("--raw-steps", type=int, default=20_000, help="random steps per round for raw stepping")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--no-sb3", action="store_true", help="leave Stable-Baselines3 out even if installed")
     parser.add_argument("--csv", help="the record (speed.csv, speed_minatar.csv on MinAtar, sweep_speed.csv --sweep)")
@@ -222,43 +158,50 @@ def main(argv=None) -> int:
     parser.add_argument("--steps", type=int, default=102400, help="--sweep: steps per run")
     parser.add_argument("--workers", type=int, default=2, help="--sweep: the engine's workers")
     args = parser.parse_args(argv)
-    record = "sweep_speed" if args.sweep else "speed_minatar" if minatar(args.env) else "speed"
+    atari = args.env.startswith("MinAtar/")  # the paper's Atari settings, else its MuJoCo ones (Config's defaults)
+    record = "sweep_speed" if args.sweep else "speed_minatar" if atari else "speed"
     args.csv = args.csv or str(common.RESULTS / f"{record}.csv")
     if args.sweep:
         return sweep_race(args, argv)
-    args.updates = (5 if minatar(args.env) else 3) if args.updates is None else args.updates
-    if args.rounds < 1 or args.updates < 1 or args.raw_steps < 1:
-        common.fail("--rounds, --updates and --raw-steps must be positive")
+    args.updates = (5 if atari else 3) if args.updates is None else args.updates
+    if args.rounds < 1 or args.updates < 1:
+        common.fail("--rounds and --updates must be positive")
+    import importlib.util
+
     import gymnasium as gym
-    import numpy as np
 
-    import minippo
+    from benchmarks.peers import sb3_model, version
     from minippo.envs import check_env_id
-    from minippo.errors import MinippoError
+    from minippo.ppo import Config, Trainer
+    from minippo.presets import ATARI
 
-    try:
-        check_env_id(args.env)  # registers the MinAtar games when asked for one
-    except MinippoError as error:
-        common.fail(str(error))
+    check_env_id(args.env)  # registers the MinAtar games when asked for one
     load_before = os.getloadavg()[0]
-    versions = {
-        "raw": f"gymnasium {gym.__version__}",
-        "minippo": f"minippo {minippo.__version__}, numpy {np.__version__}",
-    }
-    contenders = {"minippo": MinippoContender(args.env, args.seed)}
-    sb3 = None if args.no_sb3 else sb3_version()
-    if sb3:
-        versions["sb3"] = sb3
-        contenders["sb3"] = StableBaselinesContender(args.env, args.seed)
-    else:
+    preset = dict(ATARI, total_steps=10_000_000) if atari else dict(total_steps=1_000_000)
+    config = Config(env_id=args.env, seed=args.seed, **preset).validate()
+    versions = {"raw": f"gymnasium {gym.__version__}", "minippo": version("minippo")}
+    trainer = Trainer(config)  # each trainer after a warm-up update: first touches of memory, caches, lazy imports
+    trainer.run_update()
+    # {name: (steps done so far, run N updates)}
+    contenders = {"minippo": (lambda: trainer.rollout.steps, lambda n: [trainer.run_update() for _ in range(n)])}
+    if args.no_sb3 or importlib.util.find_spec("stable_baselines3") is None:
         versions["sb3"] = "skipped: " + ("--no-sb3" if args.no_sb3 else "stable-baselines3 is not installed")
+    else:
+        versions["sb3"] = version("sb3")
+        model = sb3_minatar_model(config) if atari else sb3_model(config)[0]  # the peers' settings
+        batch = model.n_steps * model.n_envs
+        model.learn(total_timesteps=batch)
+        more = lambda n: model.learn(total_timesteps=n * batch, reset_num_timesteps=False)  # noqa: E731
+        contenders["sb3"] = (lambda: model.num_timesteps, more)
     rounds: dict[str, list[float]] = {name: [] for name in ("raw", "minippo", "sb3")}
-    steps: dict[str, int] = {"raw": args.raw_steps}
+    steps: dict[str, int] = {"raw": RAW_STEPS}
     for number in range(1, args.rounds + 1):
-        rounds["raw"].append(raw_stepping(args.env, args.raw_steps, args.seed + number))
-        for name, contender in contenders.items():
-            speed, steps[name] = contender.measure(args.updates)
-            rounds[name].append(speed)
+        rounds["raw"].append(raw_stepping(args.env, RAW_STEPS, args.seed + number))
+        for name, (done, advance) in contenders.items():
+            before, started = done(), time.perf_counter()
+            advance(args.updates)
+            seconds, steps[name] = time.perf_counter() - started, done() - before
+            rounds[name].append(steps[name] / seconds)
         shown = ", ".join(f"{name} {values[-1]:.0f}" for name, values in rounds.items() if values)
         print(f"round {number}: {shown} steps/s", flush=True)
     rows = summarize(args.env, rounds, steps, versions)

@@ -1,45 +1,29 @@
 """Table 1 of the paper, scored as the paper scores it: which surrogate objective works best.
 
-    python -m benchmarks.table1            # random baselines, then every (setting, task, seed) not yet recorded, then
-                                           # the scores in benchmarks/results/table1.csv
+    python -m benchmarks.table1            # random baselines, every run not yet recorded, then results/table1.csv
     python -m benchmarks.table1 --score    # only recompute table1.csv from the records
     python -m benchmarks.table1 --random --envs MinAtar/Breakout-v1    # only the random policy's returns
 
-By default at a reduced scale: 11 settings × 3 tasks × 3 seeds × 250,000 steps (benchmarks/README.md says exactly
-what was reduced), each run a ``minippo train`` of the setting's options; recorded runs are skipped.
+By default 11 settings × 3 tasks × 3 seeds × 250,000 steps (benchmarks/README.md says what was reduced).
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 
 from benchmarks import common, scoring
-from minippo.errors import MinippoError
 from minippo.records import append_row, read_rows
 
-# (name, objective, Config overrides, the paper's score): the rows of Table 1, as ``minippo train`` options
-SETTINGS = [
-    ("No clipping or penalty", "cpi", []),
-    ("Clipping, ε = 0.1", "clip", ["clip_epsilon=0.1"]),
-    ("Clipping, ε = 0.2", "clip", ["clip_epsilon=0.2"]),
-    ("Clipping, ε = 0.3", "clip", ["clip_epsilon=0.3"]),
-    ("Adaptive KL, d_targ = 0.003", "klpen", ["kl_target=0.003"]),
-    ("Adaptive KL, d_targ = 0.01", "klpen", ["kl_target=0.01"]),
-    ("Adaptive KL, d_targ = 0.03", "klpen", ["kl_target=0.03"]),
-    ("Fixed KL, β = 0.3", "klpen", ["adaptive_kl=false", "kl_beta=0.3"]),
-    ("Fixed KL, β = 1", "klpen", ["adaptive_kl=false", "kl_beta=1"]),
-    ("Fixed KL, β = 3", "klpen", ["adaptive_kl=false", "kl_beta=3"]),
-    ("Fixed KL, β = 10", "klpen", ["adaptive_kl=false", "kl_beta=10"]),
-]
-SETTINGS = [(*setting, scoring.TABLE1_PAPER[setting[0]]) for setting in SETTINGS]
+# (name, objective, Config overrides): the rows of Table 1, in its order, as ``minippo train`` options
+SETTINGS = [("No clipping or penalty", "cpi", [])]
+SETTINGS += [(f"Clipping, ε = {eps}", "clip", [f"clip_epsilon={eps}"]) for eps in ("0.1", "0.2", "0.3")]
+SETTINGS += [(f"Adaptive KL, d_targ = {d}", "klpen", [f"kl_target={d}"]) for d in ("0.003", "0.01", "0.03")]
+SETTINGS += [(f"Fixed KL, β = {b}", "klpen", ["adaptive_kl=false", f"kl_beta={b}"]) for b in ("0.3", "1", "3", "10")]
 TASKS = ["HalfCheetah-v5", "Hopper-v5", "InvertedDoublePendulum-v5"]
-SEEDS = [1, 2, 3]
-STEPS = 250_000
 RUN_FIELDS = ["setting", "env", "seed", "steps", "return_mean", "wall_s", "steps_per_s", "commit", "command"]
-RUNS_CSV = common.RESULTS / "table1_runs.csv"
-TABLE_CSV = common.RESULTS / "table1.csv"
 RANDOM_FIELDS = ["env", "episodes", "seed", "return_mean", "return_std", "length_mean", "commit", "command"]
-RUN_ROOT = common.RUNS / "table1"
+RANDOM_CSV = common.RESULTS / "random.csv"
 
 
 def slug(setting: str) -> str:
@@ -51,13 +35,13 @@ def slug(setting: str) -> str:
 
 def with_overrides(setting: tuple, overrides: list[str]) -> tuple:
     """A row of SETTINGS with more ``--config`` overrides (KEY=VALUE) for its training."""
-    name, objective, own, paper = setting
-    return name, objective, [*own, *overrides], paper
+    name, objective, own = setting
+    return name, objective, [*own, *overrides]
 
 
 def options(setting: tuple) -> list[str]:
     """A setting as ``minippo train`` options: ['--objective', 'klpen', '--config', 'adaptive_kl=false', ...]."""
-    _, objective, overrides, _ = setting
+    _, objective, overrides = setting
     return ["--objective", objective, *(["--config", *overrides] if overrides else [])]
 
 
@@ -84,18 +68,17 @@ def random_policy(envs, random_csv) -> None:
     for env_id in envs:
         check_env_id(env_id)  # registers the MinAtar games when asked for one
     for env_id in [env_id for env_id in envs if env_id not in recorded]:
-        env = gym.make(env_id)
-        env.action_space.seed(seed)
-        returns, lengths = [], []
-        for episode in range(episodes):
-            env.reset(seed=seed + episode)
-            total, length, done = 0.0, 0, False
-            while not done:
-                _, reward, terminated, truncated, _ = env.step(env.action_space.sample())
-                total, length, done = total + float(reward), length + 1, terminated or truncated
-            returns.append(total)
-            lengths.append(length)
-        env.close()
+        played = []  # (return, length) of each episode
+        with gym.make(env_id) as env:
+            env.action_space.seed(seed)
+            for episode in range(episodes):
+                env.reset(seed=seed + episode)
+                total, length, done = 0.0, 0, False
+                while not done:
+                    _, reward, terminated, truncated, _ = env.step(env.action_space.sample())
+                    total, length, done = total + float(reward), length + 1, terminated or truncated
+                played.append((total, length))
+        returns, lengths = np.array(played).T
         row = {"env": env_id, "episodes": episodes, "seed": seed, "return_mean": round(float(np.mean(returns)), 3)}
         row |= {"return_std": round(float(np.std(returns)), 3), "length_mean": round(float(np.mean(lengths)), 1)}
         row |= {"commit": common.git_commit(), "command": common.invocation("table1", ["--random", "--envs", env_id])}
@@ -109,32 +92,27 @@ def sweep_runs(settings, envs, seeds, steps) -> list:
     from minippo.sweep import Run
 
     runs = []
-    for env_id in envs:
-        for seed in seeds:
-            for setting in settings:
-                name, objective, overrides, _ = setting
-                config = Config(env_id=env_id, total_steps=steps, seed=seed, objective=objective)
-                labels = {"setting": name, "env": env_id, "seed": seed}
-                run_name = f"{slug(name)}-{env_id}-seed{seed}"
-                runs.append(Run(run_name, config.with_overrides(overrides).validate(), labels, options(setting)))
+    for env_id, seed, setting in itertools.product(envs, seeds, settings):
+        name, objective, overrides = setting
+        config = Config(env_id=env_id, total_steps=steps, seed=seed, objective=objective).with_overrides(overrides)
+        labels = {"setting": name, "env": env_id, "seed": seed}
+        runs.append(Run(f"{slug(name)}-{env_id}-seed{seed}", config.validate(), labels, options(setting)))
     return runs
 
 
+@common.one_line_errors
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--envs", nargs="+", default=TASKS, metavar="ENV")
-    parser.add_argument("--seeds", nargs="+", type=int, default=SEEDS)
-    parser.add_argument("--steps", type=int, default=STEPS)
+    parser.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3])
+    parser.add_argument("--steps", type=int, default=250_000)
     parser.add_argument("--settings", nargs="+", type=int, metavar="N", help="only these rows of Table 1 (1-11)")
-    parser.add_argument(
-        "--config", nargs="+", default=[], metavar="KEY=VALUE", help="extra Config overrides for every run"
-    )
+    parser.add_argument("--config", nargs="+", default=[], metavar="KEY=VALUE", help="more overrides for every run")
     parser.add_argument("--score", action="store_true", help="only rewrite table1.csv from the recorded runs")
-    parser.add_argument("--runs-csv", default=str(RUNS_CSV))
+    parser.add_argument("--runs-csv", default=str(common.RESULTS / "table1_runs.csv"))
     parser.add_argument("--random", action="store_true", help="only record the random policy's returns on --envs")
-    parser.add_argument("--random-csv", default=str(common.RESULTS / "random.csv"))
-    parser.add_argument("--table-csv", default=str(TABLE_CSV))
-    parser.add_argument("--runs", default=str(RUN_ROOT), help="the folder of run folders")
+    parser.add_argument("--table-csv", default=str(common.RESULTS / "table1.csv"))
+    parser.add_argument("--runs", default=str(common.RUNS / "table1"), help="the folder of run folders")
     common.add_sweep_options(parser)
     args = parser.parse_args(argv)
     common.check_steps(args.steps)
@@ -142,20 +120,19 @@ def main(argv=None) -> int:
     if any(not 1 <= number <= len(SETTINGS) for number in numbers):
         common.fail(f"--settings are row numbers of Table 1, from 1 to {len(SETTINGS)}")
     settings = [with_overrides(SETTINGS[number - 1], args.config) for number in numbers]
+    if args.list:
+        return common.show_list(sweep_runs(settings, args.envs, args.seeds, args.steps), args.runs_csv, RUN_FIELDS)
     code = 0  # 1 when a training failed (it is logged in the runs folder's sweep.csv)
-    try:
-        if args.random or not args.score:
-            random_policy(args.envs, args.random_csv)  # the 0 of each task's scale, once
-        if args.random:
-            return 0
-        if not args.score:
-            runs = sweep_runs(settings, args.envs, args.seeds, args.steps)
-            code = common.run_sweep(runs, args.runs, args.runs_csv, RUN_FIELDS, args)
-            if code == 130:  # interrupted: the table waits for the next run of the command
-                return code
-        table = write_table(args.runs_csv, args.random_csv, args.table_csv, args.envs, args.seeds, args.steps)
-    except (common.BenchmarkError, MinippoError) as error:
-        common.fail(str(error))
+    if args.random or not args.score:
+        random_policy(args.envs, RANDOM_CSV)  # the 0 of each task's scale, once
+    if args.random:
+        return 0
+    if not args.score:
+        runs = sweep_runs(settings, args.envs, args.seeds, args.steps)
+        code = common.run_sweep(runs, args.runs, args.runs_csv, RUN_FIELDS, args)
+        if code == 130:  # interrupted: the table waits for the next run of the command
+            return code
+    table = write_table(args.runs_csv, RANDOM_CSV, args.table_csv, args.envs, args.seeds, args.steps)
     for row in table:
         print(f"{row['setting']:<30} {row['score']:>6.2f}   paper {row['paper_score']:>5.2f}   ({row['runs']} runs)")
     return code

@@ -1,17 +1,17 @@
-"""Chapter 10's ablations: every implementation detail of minippo switched off, one at a time, against the defaults,
-as a sweep on minippo sweep's engine.
+"""Chapter 10's ablations: each implementation detail of minippo off, one at a time, on minippo sweep's engine.
 
     python -m benchmarks.ablations              # every ablation, seeds 1 and 2, Hopper-v5, 163,840 steps
-    python -m benchmarks.ablations --dry-run    # print the commands of the runs not yet recorded
+    python -m benchmarks.ablations --list       # what is recorded, what is left
     python -m benchmarks.ablations --only default anneal_lr --seeds 3
 
-Each run is ``minippo train ... --config <the detail>=false``, recorded in results.csv with ``return_last10``, the
-mean of the last 10 updates' returns; recorded runs are skipped.
+Each run is ``minippo train ... --config <the detail>=false``, recorded in results.csv with ``return_last10`` (the
+mean of the last 10 updates' returns).
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 from pathlib import Path
 
 from benchmarks import common
@@ -32,12 +32,11 @@ def sweep_runs(names, env_id: str, steps: int, seeds) -> list:
     from minippo.sweep import Run
 
     runs = []
-    for seed in seeds:
-        for name in names:
-            override = [] if name == "default" else [f"{name}=false"]
-            config = Config(env_id=env_id, total_steps=steps, seed=seed).with_overrides(override)
-            labels = {"ablation": name, "override": override[0] if override else "(none)", "env": env_id, "seed": seed}
-            runs.append(Run(f"{name}-seed{seed}", config, labels, ["--config", *override] if override else []))
+    for seed, name in itertools.product(seeds, names):
+        override = [] if name == "default" else [f"{name}=false"]
+        config = Config(env_id=env_id, total_steps=steps, seed=seed).with_overrides(override)
+        labels = {"ablation": name, "override": override[0] if override else "(none)", "env": env_id, "seed": seed}
+        runs.append(Run(f"{name}-seed{seed}", config, labels, ["--config", *override] if override else []))
     return runs
 
 
@@ -46,24 +45,17 @@ def last_ten(folder: Path) -> dict:
     return {"return_last10": round(sum(tail) / len(tail), 2)}
 
 
+@common.one_line_errors
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="benchmarks.ablations", description=__doc__.split("\n\n")[0])
     parser.add_argument("--env", default="Hopper-v5")
     parser.add_argument("--steps", type=int, default=163_840, help="per run (80 updates of T = 2048 by default)")
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
-    parser.add_argument("--only", nargs="+", metavar="ABLATION", help=f"a subset of: {', '.join(ABLATIONS)}")
-    parser.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
+    parser.add_argument("--only", nargs="+", choices=ABLATIONS, metavar="ABLATION", help="only these (default: all)")
     common.add_sweep_options(parser)
     args = parser.parse_args(argv)
-    unknown = [name for name in args.only or [] if name not in ABLATIONS]
-    if unknown:
-        common.fail(f"unknown ablation(s) {', '.join(unknown)}; choose from {', '.join(ABLATIONS)}")
     common.check_steps(args.steps)
     runs = sweep_runs(args.only or ABLATIONS, args.env, args.steps, args.seeds)
-    if args.dry_run:
-        for run in common.todo(runs, RESULTS, FIELDS):
-            print(run.command(common.relative(HERE / "runs")))
-        return 0
     return common.run_sweep(runs, HERE / "runs", RESULTS, FIELDS, args, more=last_ten)
 
 
