@@ -109,12 +109,14 @@ class RewardModel:
         self.prompt_len = prompt_len
         self.by_subject = by_subject  # False: φ = c(y) alone, a model blind to the prompt (for comparison)
 
-    def features(self, tokens: np.ndarray, lengths: np.ndarray) -> np.ndarray:
-        """φ(x, y) of whole texts (n, T), prompts included, and their lengths: (n, V + len(NOUNS) V), or (n, V)."""
-        counts = token_counts(tokens, lengths, self.prompt_len)
+    def features(self, tokens: np.ndarray, lengths: np.ndarray, prompt_len: int | None = None) -> np.ndarray:
+        """φ(x, y) of whole texts (n, T), prompts included, and their lengths: (n, V + len(NOUNS) V), or (n, V). The
+        prompt is the first ``prompt_len`` tokens (by default the model's own), and only the tokens after it count."""
+        prompt_len = self.prompt_len if prompt_len is None else prompt_len
+        counts = token_counts(tokens, lengths, prompt_len)
         if not self.by_subject:
             return counts
-        by_subject = subjects(tokens, self.prompt_len)[:, :, None] * counts[:, None, :]
+        by_subject = subjects(tokens, prompt_len)[:, :, None] * counts[:, None, :]
         return np.concatenate([counts, by_subject.reshape(len(tokens), -1)], axis=1)
 
     def word_weights(self, noun: str) -> np.ndarray:
@@ -123,9 +125,10 @@ class RewardModel:
             return self.weights.copy()
         return self.weights[:V] + self.weights[V:].reshape(len(NOUNS), V)[NOUNS.index(noun)]
 
-    def score(self, tokens: np.ndarray, lengths: np.ndarray) -> np.ndarray:
-        """The score of each response, given the whole texts (n, T) and their lengths, prompts included."""
-        return self.features(tokens, lengths) @ self.weights
+    def score(self, tokens: np.ndarray, lengths: np.ndarray, prompt_len: int | None = None) -> np.ndarray:
+        """The score of each response, given the whole texts (n, T) and their lengths, prompts included, and the
+        prompt's length if it is not the model's own (a longer prompt's last words are not part of the response)."""
+        return self.features(tokens, lengths, prompt_len) @ self.weights
 
     def loss_and_grad(self, features_preferred: np.ndarray, features_rejected: np.ndarray):
         """The penalised loss and ∂/∂θ = φ_wᵀ ∂L/∂r_w + φ_lᵀ ∂L/∂r_l + λθ (r is linear in θ: ∂r/∂θ = φ)."""

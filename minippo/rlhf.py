@@ -65,6 +65,10 @@ class RLHFConfig:
     value_coef: float = 0.5  # c1
     max_grad_norm: float = 0.5
 
+    def __post_init__(self):
+        if self.kl_rule not in ("eq8", "proportional"):
+            raise ValueError(f"kl_rule must be 'eq8' or 'proportional', not {self.kl_rule!r}")
+
     def ppo_config(self) -> Config:
         """The fields of minippo's Config that its minibatch update reads."""
         return Config(
@@ -133,7 +137,7 @@ def collect(
         ended = ~done & (action == TOKEN[EOS])
         lengths[ended] = t + 1
         done |= ended
-    scores = reward_model.score(tokens, P + lengths)
+    scores = reward_model.score(tokens, P + lengths, P)  # the response only, whatever the prompt's length
     rewards = kl_shaped_rewards(logp, logp_ref, scores, lengths, beta)
     return {
         "tokens": tokens,
@@ -306,9 +310,7 @@ def short_response_scores(reward_model: RewardModel, prompts: np.ndarray) -> np.
     tokens, lengths = short_responses()
     m, P = prompts.shape
     texts = np.concatenate([np.repeat(prompts, len(tokens), axis=0), np.tile(tokens, (m, 1))], axis=1)
-    at_most = RewardModel(reward_model.l2, P, reward_model.by_subject)  # the same weights, the prompt P tokens long
-    at_most.weights = reward_model.weights
-    return at_most.score(texts, P + np.tile(lengths, m)).reshape(m, len(tokens))
+    return reward_model.score(texts, P + np.tile(lengths, m), P).reshape(m, len(tokens))
 
 
 def optimal_log_probs(logp_ref: np.ndarray, scores: np.ndarray, beta: float):

@@ -232,6 +232,24 @@ def test_collect_answers_the_prompts_and_charges_the_kl_on_the_response_only(pie
     assert np.allclose(batch["rewards"].sum(axis=1), batch["scores"])
 
 
+def test_collect_scores_the_response_only_when_the_prompt_is_longer_than_the_reward_models(pieces):
+    model, reward_model, _ = pieces
+    assert reward_model.prompt_len == 2
+    prompts = lm.make_prompts(40, np.random.default_rng(0), 3)  # DET NOUN VERB: the verb is in the prompt
+    batch = collect(model, model, reward_model, prompts, 0.0, np.random.default_rng(1), response_len=2)
+    by_hand = [
+        reward_model.word_weights(lm.VOCAB[row[1]])[row[3:n]].sum()
+        for row, n in zip(batch["tokens"], batch["text_lengths"])
+    ]
+    assert_close(batch["scores"], by_hand)
+    assert np.abs(reward_model.weights[prompts[:, 2]]).max() > 1e-3  # the verbs' weights would have moved the scores
+
+
+def test_an_unknown_kl_rule_is_an_error():
+    with pytest.raises(ValueError, match="kl_rule"):
+        RLHFConfig(kl_target=2.0, kl_rule="eq 8")
+
+
 def test_proportional_beta_moves_by_at_most_the_clipped_error():
     assert proportional_beta(1.0, 2.0, 2.0) == 1.0
     assert np.isclose(proportional_beta(1.0, 100.0, 2.0), 1.02) and np.isclose(proportional_beta(1.0, 0.0, 2.0), 0.98)
