@@ -15,30 +15,13 @@ import pytest
 from _harness import call_checking_inputs, check_array, check_close, numerical_gradient
 
 from minippo import conv
+from minippo.gradcheck import conv2d_by_definition
 
 student = _harness.student  # the fixture: the implementation under test (see _harness.py)
 pytest_generate_tests = _harness.pytest_generate_tests  # one run per wrong variant under MINIPPO_IMPL=wrong
 rng = _harness.rng  # a seeded NumPy Generator
 
 pytestmark = pytest.mark.timeout(20)
-
-
-def conv_by_definition(x, K, b):
-    """y[n, i, j, f] = b[f] + Σ_{p, q, c} x[n, i + p, j + q, c] K[p, q, c, f], one output number at a time."""
-    n, H, W, C = x.shape
-    kh, kw, _, F = K.shape
-    y = np.zeros((n, H - kh + 1, W - kw + 1, F))
-    for s in range(n):
-        for i in range(H - kh + 1):
-            for j in range(W - kw + 1):
-                for f in range(F):
-                    total = b[f]
-                    for p in range(kh):
-                        for q in range(kw):
-                            for c in range(C):
-                                total += x[s, i + p, j + q, c] * K[p, q, c, f]
-                    y[s, i, j, f] = total
-    return y
 
 
 def grad_x_by_definition(K, grad_y, image_shape):
@@ -101,19 +84,19 @@ def forward_mistakes(x, K, b) -> dict:
     mistakes = {
         "the kernel is flipped, a true convolution (x[i − p, j − q], or K[kh − 1 − p, kw − 1 − q]): the convolution "
         "of deep learning is a cross-correlation, y[i, j] = b + Σ x[i + p, j + q] K[p, q], the kernel as it is": (
-            conv_by_definition(x, K[::-1, ::-1], b)
+            conv2d_by_definition(x, K[::-1, ::-1], b)
         ),
-        "the bias is missing: b[f] is added to every output pixel of filter f": conv_by_definition(x, K, 0 * b),
+        "the bias is missing: b[f] is added to every output pixel of filter f": conv2d_by_definition(x, K, 0 * b),
     }
     if kh == kw:
         mistakes["the kernel's two spatial axes are swapped: K[p, q] weighs x[i + p, j + q], p down and q across"] = (
-            conv_by_definition(x, K.transpose(1, 0, 2, 3), b)
+            conv2d_by_definition(x, K.transpose(1, 0, 2, 3), b)
         )
     if C == F:
         mistakes[
             "the kernel's channel axes are read the wrong way round: K is (kh, kw, C, F), and K[p, q, c, f] weighs "
             "input channel c in output channel f"
-        ] = conv_by_definition(x, K.transpose(0, 1, 3, 2), b)
+        ] = conv2d_by_definition(x, K.transpose(0, 1, 3, 2), b)
     return mistakes
 
 
@@ -126,7 +109,7 @@ def named(got, mistakes: dict) -> str | None:
 
 def check_forward(y, x, K, b, what: str) -> None:
     check_output(y, x, K, what)
-    expected = conv_by_definition(x, K, b)
+    expected = conv2d_by_definition(x, K, b)
     if not np.allclose(y, expected, rtol=1e-6, atol=1e-9):
         words = named(y, forward_mistakes(x, K, b))
         assert words is None, f"conv2d_forward: {what} is wrong: {words}"
@@ -267,7 +250,7 @@ def test_conv2d_backward_matches_finite_differences(student, rng, x_shape, K_sha
     n, out_pixels = x_shape[0], weights[..., 0].size
 
     def loss():
-        return float(np.sum(weights * conv_by_definition(x, K, b)))
+        return float(np.sum(weights * conv2d_by_definition(x, K, b)))
 
     result = call_checking_inputs(student.conv2d_backward, "conv2d_backward", x, K, weights)
     grad_x, grad_K, grad_b = backward_result(result, x, K, weights)
