@@ -1,6 +1,7 @@
-"""What the book's pages share, so that each page can stay about PPO: the plot style, central finite differences
-(minippo.gradcheck), the two CartPole settings (minippo.presets), one batch collected from a fresh policy, K
-epochs of minibatch Adam on that one batch, Markdown tables, and whether a record's commit ran the code at hand.
+"""What the book's pages share, so that each page can stay about PPO: the draw of their seeds, the plot style,
+central finite differences (minippo.gradcheck), the two CartPole settings (minippo.presets), one batch collected
+from a fresh policy, K epochs of minibatch Adam on that one batch, Markdown tables, and whether a record's commit ran
+the code at hand.
 
 Every page imports it first (its cells run with ``book/`` as the working directory).
 """
@@ -24,6 +25,21 @@ from minippo.ppo import Trainer, compute_advantages, flatten, update_minibatch  
 from minippo.presets import CARTPOLE_PPO, CARTPOLE_VANILLA  # noqa: E402
 
 threadpool_limits(1, user_api="blas")  # whether NumPy was loaded before this module or not
+
+
+def _book_seed() -> int:
+    text = os.environ.get("BOOK_SEED", "0").strip() or "0"
+    if not text.isdigit():
+        raise SystemExit(f"BOOK_SEED must be a whole number of 0 or more, not {text!r}")
+    return int(text)
+
+
+# Which draw of the book's experiments this build is: every seed a page uses is ``SEED + k`` for a small k of its
+# own. The published book is draw 0 (SEED = 0); ``BOOK_SEED=3 jupyter-book build book/`` builds it under draw 3, whose
+# seeds start at 3000 so that no two draws share one, and tools/check_claims.py runs every page under draws 0-7 to
+# check that each sentence holds for the experiment, not for one draw of it.
+SEED = 1000 * _book_seed()
+
 SLATE = "#4f6d8f"
 plt.rcParams.update(
     {
@@ -41,6 +57,7 @@ __all__ = [
     "INK",
     "ORANGE",
     "SAGE",
+    "SEED",
     "SLATE",
     "PPO_CARTPOLE",
     "VANILLA_CARTPOLE",
