@@ -264,50 +264,54 @@ def test_a_second_ctrl_c_stops_at_once_and_keeps_the_last_checkpoint(tmp_path):
     assert len(progress_without_clock(out)) == kept < 6  # the update under way was not finished
 
 
-def descendants(pid: int) -> set[int]:
-    """The processes started, directly or not, by process ``pid``."""
-    children: dict[int, list[int]] = {}
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                parent = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
-            except (OSError, ValueError, IndexError):
-                continue
-            children.setdefault(parent, []).append(int(entry.name))
-    found, todo = set(), [pid]
-    while todo:
-        for child in children.get(todo.pop(), []):
-            found.add(child)
-            todo.append(child)
-    return found
+GATE_UPDATE = 3  # the update after whose checkpoint the sweep's worker stops for the test to kill it
 
 
-def cpu_seconds(pid: int) -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+def train_until_killed(config_dict, name="", board=None, resume=None, gate=""):
+    """The sweep's task for the killed-worker test: on its first attempt it trains as ``train_run`` does until the
+    board has kept the checkpoint of update ``GATE_UPDATE``, then writes its pid to the file ``gate`` and waits to be
+    killed; a retry (``resume`` given) trains as ``train_run`` does. So the kill lands at an update the test chose,
+    however fast the machine."""
+    import ray
+
+    from minippo.sweep import train_run
+
+    class Gate:  # the board, whose ``keep`` waits for the checkpoint to be kept and stops the run at the gate
+        def __init__(self, board):
+            self.board, self.report, self.keep = board, board.report, self
+
+        def remote(self, run_name, update, files):
+            ray.get(self.board.keep.remote(run_name, update, files))
+            if update >= GATE_UPDATE:
+                Path(gate).write_text(str(os.getpid()))
+                time.sleep(600)
+
+    return train_run(config_dict, name, board if resume is not None else Gate(board), resume)
 
 
-def kill_the_training_worker(after_cpu_s: float, killed: list) -> None:
-    """SIGKILL the Ray worker of this process that trains a run, once it has spent ``after_cpu_s`` CPU seconds on it."""
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline:
-        for pid in descendants(os.getpid()):
-            try:
-                training = Path(f"/proc/{pid}/cmdline").read_bytes().startswith(b"ray::train_run")
-                if training and not killed:
-                    killed.append((pid, cpu_seconds(pid)))
-                if training and pid == killed[0][0] and cpu_seconds(pid) - killed[0][1] >= after_cpu_s:
-                    os.kill(pid, signal.SIGKILL)
-                    killed.append(pid)
-                    return
-            except (OSError, IndexError):
-                continue
+def kill_at_the_gate(gate: Path, killed: list) -> None:
+    """SIGKILL the process whose pid the gate file holds, once it is there."""
+    deadline = time.monotonic() + 240
+    while time.monotonic() < deadline and not gate.exists():
         time.sleep(0.05)
+    if gate.exists():
+        time.sleep(0.1)  # the pid is written whole (a few bytes)
+        pid = int(gate.read_text())
+        os.kill(pid, signal.SIGKILL)
+        killed.append(pid)
 
 
 @pytest.mark.timeout(300)
 def test_a_sweep_retries_a_killed_worker_s_run_from_its_checkpoint(ray_environment, tmp_path, monkeypatch):
+    import ray.cloudpickle
+
     from minippo import sweep
+
+    ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])  # the workers cannot import this test module
+    gate = tmp_path / "gate"
+
+    def task(config_dict, name="", board=None, resume=None):
+        return train_until_killed(config_dict, name, board, resume, str(gate))
 
     resumed_from = []
     finish = sweep.Sweep.finish
@@ -317,19 +321,20 @@ def test_a_sweep_retries_a_killed_worker_s_run_from_its_checkpoint(ray_environme
         finish(self, run, result, error, attempts)
 
     monkeypatch.setattr(sweep.Sweep, "finish", finish_and_note)
+    monkeypatch.setattr(sweep.Sweep, "task", staticmethod(task))
     out = tmp_path / "sweep"
     killed: list = []
-    killer = threading.Thread(target=kill_the_training_worker, args=(1.5, killed), daemon=True)
+    killer = threading.Thread(target=kill_at_the_gate, args=(gate, killed), daemon=True)
     killer.start()
-    words = ["sweep", "CartPole-v1", "--seeds", "2", "--steps", "16384", "--out", str(out), "--workers", "1"]
+    words = ["sweep", "CartPole-v1", "--seeds", "2", "--steps", "4096", "--out", str(out), "--workers", "1"]
     words += ["--retries", "1", "--quiet", "--config", "horizon=256", "epochs=4", "checkpoint_every=1"]
     assert main(words) == 0
     killer.join(timeout=5)
-    assert len(killed) == 2, "the worker was not killed"
+    assert len(killed) == 1, "the worker did not reach the gate"
     with open(out / "sweep.csv", newline="") as handle:
         (row,) = list(csv.DictReader(handle))
     assert row["status"] == "ok" and row["attempts"] == "2", row
-    assert resumed_from[0] > 0, "the retry started from scratch"
+    assert resumed_from == [GATE_UPDATE], "the retry did not start from the checkpoint of the update it was killed at"
     alone = tmp_path / "alone"
     command = shlex.split(row["command"])
     command[command.index("--out") + 1] = str(alone)
