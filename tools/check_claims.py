@@ -39,9 +39,9 @@ RECORD = ROOT / "benchmarks" / "results" / "book_claims.csv"
 RECORDER = "__book_claim__"
 
 
-def executable_pages() -> list[Path]:
-    """The pages of the table of contents that have code cells, in the order of the file names."""
-    return sorted(p for p in BOOK.glob("*.md") if "```{code-cell}" in p.read_text(encoding="utf-8"))
+def executable_pages(book: Path = BOOK) -> list[Path]:
+    """The book's pages that have code cells, in the order of the file names."""
+    return sorted(p for p in book.glob("*.md") if "```{code-cell}" in p.read_text(encoding="utf-8"))
 
 
 class _Recorder(ast.NodeTransformer):
@@ -194,13 +194,14 @@ def main(argv=None) -> int:
     parser.add_argument("--jobs", type=int, default=len(os.sched_getaffinity(0)), help="pages at a time")
     parser.add_argument("--timeout", type=int, default=900, help="seconds a cell may take")
     parser.add_argument("--out", type=Path, default=RECORD, help="the CSV record (default %(default)s)")
+    parser.add_argument("--book", type=Path, default=BOOK, help="the book's folder (default %(default)s)")
     args = parser.parse_args(argv)
     try:
         seeds = seeds_from(args.seeds)
         env = dict(item.split("=", 1) for item in args.env)
     except ValueError:
         parser.error("--seeds takes integers such as 0-7 or 0,3,5, and --env takes NAME=VALUE")
-    pages = executable_pages()
+    pages = executable_pages(args.book)
     if args.pages:
         unknown = set(args.pages) - {p.stem for p in pages}
         if unknown:
@@ -220,8 +221,10 @@ def main(argv=None) -> int:
             result = future.result()
             result["column"] = column(result["seed"])
             results.append(result)
-            failed = [c["key"] for c in result["claims"] if c["verdict"] != "held"]
-            status = "ok" if not failed and not result["errors"] else f"{len(failed)} claims not held"
+            counts = {}
+            for claim in result["claims"]:
+                counts[claim["verdict"]] = counts.get(claim["verdict"], 0) + 1
+            status = ", ".join(f"{n} {verdict}" for verdict, n in sorted(counts.items()))
             print(
                 f"{result['page']} seed {result['seed']}: {status} ({result['seconds']:.0f} s)"
                 + "".join(f"\n    {e}" for e in result["errors"]),
