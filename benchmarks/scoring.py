@@ -221,7 +221,7 @@ def score_all(results=RESULTS, folder=TABLES) -> dict[str, list[dict]]:
     seven = {name: record(name) for name in ("seven_tasks_runs.csv", "mujoco.csv")}
     seven["table1_1m_runs.csv"] = [r for r in default if r["setting"] == "Clipping, ε = 0.2"]
     details = {"all on": default, **{f"{d} off": record(f"cpi_without_{d}_runs.csv") for d in DETAILS}}
-    two = {"defaults": default, "as the paper describes it": paper}
+    two = {"defaults": default, "without the three details": paper}
     more_seeds = {"seeds 1-3": default, "seeds 4-6": record("table1_1m_more_seeds_runs.csv")}
     tables = {
         "seven_tasks": [row for name, runs in seven.items() for row in seven_tasks(runs, name)],
