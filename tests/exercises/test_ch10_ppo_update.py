@@ -743,6 +743,35 @@ class Scene:
                 "normalised then (s_T, or a truncated episode's final observation, for a bootstrap value) saw the "
                 "updated statistics instead of the batch's; normalise everything first and update the statistics last"
             )
+        for i in range(N):
+            mine = [event for event in log if event[0] in ("step", "reset") and event[1] == i]
+            t = 0
+            for k, event in enumerate(mine):
+                if event[0] == "reset":
+                    if t == 0 or t > T or not want["ended"][t - 1, i] or mine[k - 1][0] == "reset":
+                        when = "before its first step" if t == 0 else f"after step t = {t - 1}"
+                        raise AssertionError(
+                            f"collect: environment {i} was reset {when}{batch}, where its episode had not ended: "
+                            "call env.reset() only right after a step that returned terminated or truncated"
+                        )
+                    continue
+                if 0 < t <= T and want["ended"][t - 1, i] and mine[k - 1][0] != "reset":
+                    how = "terminated" if want["terminated"][t - 1, i] else "truncated"
+                    raise AssertionError(
+                        f"collect: environment {i}'s episode ended at step t = {t - 1} ({how}){batch}, but it was "
+                        f"stepped again at step {t} without env.reset(): reset it right after a step that returned "
+                        "terminated or truncated, and go on from the observation reset returns"
+                    )
+                t += 1
+            assert t == T, (
+                f"collect: environment {i} took {t} steps in a batch of T = {T}{batch}: every environment takes one "
+                "step per step of the batch"
+            )
+            if want["ended"][T - 1, i]:
+                assert mine[-1][0] == "reset", (
+                    f"collect: environment {i}'s episode ended at the batch's last step{batch}, but it was not reset: "
+                    "reset it, so that the next batch starts from the new episode's first observation"
+                )
         samples = [event for event in log if event[0] == "sample"]
         assert len(samples) == T, (
             f"collect: policy.sample was called {len(samples)} times in a batch of T = {T} steps: call it once per "
@@ -767,48 +796,20 @@ class Scene:
                     f"o_t = obs_normalizer(s_t) = {show(want['obs'][t, i])} (s_t = {show(want['s'][t, i])}){guess}"
                 )
         for i in range(N):
-            mine = [event for event in log if event[0] in ("step", "reset") and event[1] == i]
-            t = 0
-            for k, event in enumerate(mine):
-                if event[0] == "reset":
-                    if t == 0 or not want["ended"][t - 1, i] or mine[k - 1][0] == "reset":
-                        when = "before its first step" if t == 0 else f"after step t = {t - 1}"
-                        raise AssertionError(
-                            f"collect: environment {i} was reset {when}{batch}, where its episode had not ended: "
-                            "call env.reset() only right after a step that returned terminated or truncated"
+            given_actions = [event[2] for event in log if event[0] == "step" and event[1] == i]
+            for t, action in enumerate(given_actions):
+                expected = want["clipped"][t, i]
+                if not np.allclose(action, expected, rtol=1e-9, atol=1e-12):
+                    guess = ""
+                    if self.bounds is not None and np.allclose(action, want["actions"][t, i]):
+                        guess = (
+                            ": the action as sampled; with action_bounds the environment gets np.clip(a_t, low, high)"
                         )
-                    continue
-                if t > 0 and want["ended"][t - 1, i] and mine[k - 1][0] != "reset":
-                    how = "terminated" if want["terminated"][t - 1, i] else "truncated"
                     raise AssertionError(
-                        f"collect: environment {i}'s episode ended at step t = {t - 1} ({how}){batch}, but it was "
-                        f"stepped again at step {t} without env.reset(): reset it right after a step that returned "
-                        "terminated or truncated, and go on from the observation reset returns"
+                        f"collect: environment {i} was given the action {show(action)} at step t = {t}{batch}, "
+                        f"not {show(expected)} (a_t[{i}] of policy.sample(o_t)"
+                        f"{', clipped to action_bounds' if self.bounds is not None else ''}){guess}"
                     )
-                if t < T:
-                    expected = want["clipped"][t, i]
-                    if not np.allclose(event[2], expected, rtol=1e-9, atol=1e-12):
-                        guess = ""
-                        if self.bounds is not None and np.allclose(event[2], want["actions"][t, i]):
-                            guess = (
-                                ": the action as sampled; with action_bounds the environment gets "
-                                "np.clip(a_t, low, high)"
-                            )
-                        raise AssertionError(
-                            f"collect: environment {i} was given the action {show(event[2])} at step t = {t}{batch}, "
-                            f"not {show(expected)} (a_t[{i}] of policy.sample(o_t)"
-                            f"{', clipped to action_bounds' if self.bounds is not None else ''}){guess}"
-                        )
-                t += 1
-            assert t == T, (
-                f"collect: environment {i} took {t} steps in a batch of T = {T}{batch}: every environment takes one "
-                "step per step of the batch"
-            )
-            if want["ended"][T - 1, i]:
-                assert mine[-1][0] == "reset", (
-                    f"collect: environment {i}'s episode ended at the batch's last step{batch}, but it was not reset: "
-                    "reset it, so that the next batch starts from the new episode's first observation"
-                )
         given = log[update][1]
         rows = given.reshape(-1, OBS_DIM) if given.size % OBS_DIM == 0 else given
         acted = want["s"][:T].reshape(-1, OBS_DIM)
@@ -831,9 +832,9 @@ class Scene:
             if rows.shape == rows_of.shape and np.allclose(np.sort(rows, axis=0), np.sort(rows_of, axis=0)):
                 named = f": {words}?"
         raise AssertionError(
-            f"collect: obs_normalizer.update{batch} got an array of shape {given.shape}; it should get the T·N = "
-            f"{T * N} raw observations s_0 … s_{{T−1}} the policy acted on, shape ({T * N}, {OBS_DIM}) or ({T}, {N}, "
-            f"{OBS_DIM}){named}"
+            f"collect: obs_normalizer.update{batch} should get the T·N = {T * N} raw observations s_0 … s_{{T−1}} "
+            f"the policy acted on, as an array of shape ({T * N}, {OBS_DIM}) or ({T}, {N}, {OBS_DIM}), not the array "
+            f"of shape {given.shape} it got{named}"
         )
 
     def check_result(self, result, want, raw_obs) -> None:
@@ -1032,6 +1033,15 @@ def test_collect_matches_minippo_s_rollout_on_cartpole(student):
                 "raw_obs": rollout.raw_obs,
             }
             check_rollout_arrays(result, theirs_batch, T, N, raw)
+            for _, t, given in (event for event in log if event[0] == "sample"):
+                check_close(
+                    given,
+                    batch.obs[t],
+                    "collect",
+                    f"the observations policy.sample got at step t = {t} of batch {b} on CartPole-v1 (minippo's o_t)",
+                    rtol=1e-9,
+                    atol=1e-12,
+                )
 
             def where(t, i, b=b, flags=batch):
                 end = " (terminated there)" if flags.terminated[t, i] else ""
