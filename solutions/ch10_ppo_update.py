@@ -137,7 +137,7 @@ def collect(policy, envs, obs_normalizer, raw_obs, horizon: int, action_bounds=N
     statistics obs_normalizer had when the call began. Call obs_normalizer.update once, last, after every
     observation has been normalised, with the T·N raw observations the policy acted on, s_0 … s_{T−1}, as one array
     of shape (T·N, obs_dim) or (T, N, obs_dim) (rows in any order): not s_T, not the final observations. The next
-    batch is normalised with the new statistics (minippo: Rollout.collect and ObservationNormalizer.update).
+    batch is normalised with the new statistics.
 
     Returns a dict of new arrays:
         "obs" (T, N, obs_dim) float64            o_t, the normalised observations the policy acted on
