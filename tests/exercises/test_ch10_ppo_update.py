@@ -994,7 +994,6 @@ def test_collect_two_batches_in_a_row(student):
     scene.run(student)
 
 
-@pytest.mark.timeout(60)
 def test_collect_matches_minippo_s_rollout_on_cartpole(student):
     # three batches of T = 64 steps in N = 4 CartPole-v1 environments with a time limit of 30 steps, so that the
     # untrained policy's episodes both terminate (the pole falls) and are truncated; the statistics are on
