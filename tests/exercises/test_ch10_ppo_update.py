@@ -872,15 +872,20 @@ class Scene:
         entries("values", {"V of the raw observation s_t; V(o_t) takes the normalised one": self.raw_values(want)})
         T1 = np.arange(T) == T - 1
         V_next_later = np.where(T1[:, None], want["V"][T], want["V"][np.minimum(np.arange(T) + 2, T)])
+        at_truncation = np.where(want["truncated"], 1.0, np.nan)  # a mistake named only where it shows
+        at_termination = np.where(want["terminated"], 1.0, np.nan)
         entries(
             "next_values",
             {
                 "0 where a time limit truncated the episode: no bootstrap at a truncation, but a time limit is not a "
-                "terminal state; bootstrap from V of the final observation the step returned": np.zeros((T, N)),
+                "terminal state; bootstrap from V of the final observation the step returned": 0.0 * at_truncation,
                 "V of the final observation where the episode terminated: a bootstrap at a termination, where nothing "
-                "follows (0)": want["V_final"],
+                "follows (0)": want["V_final"] * at_termination,
                 "V of the observation env.reset() returned (the next episode's first), not of the final observation "
-                "the step returned; keep that one before resetting": want["V"][1:],
+                "the step returned; keep that one before resetting": want["V"][1:] * at_truncation,
+                "V of the observation env.reset() returned (the next episode's first) where the episode terminated: "
+                "nothing follows a terminal state, so next_values is 0 there (minippo's Batch keeps that value, which "
+                "GAE multiplies by 0; the contract asks for 0)": want["V"][1:] * at_termination,
                 "V(o_t), the value of the step's own observation (off by one): next_values[t] is V(o_{t+1})": want[
                     "values"
                 ],

@@ -508,7 +508,7 @@ ROLLOUT_MISTAKES = {
     ),
     "rollout_post_reset_value_at_every_episode_end": (
         dict(at_truncation="reset", at_termination="reset"),
-        r"V of the observation env\.reset\(\) returned",
+        r"V of the observation env\.reset\(\) returned \(the next episode's first\) where the episode terminated",
     ),
     "rollout_keeps_truncated_with_terminated": (dict(both_truncated=True), r"counts as terminated"),
     "rollout_resets_only_on_termination": (
