@@ -45,7 +45,8 @@ STUDENT_FOLDER_BYTES = 20 << 20  # a student's folder larger than this is not co
 MAX_NOTES = 50
 
 # the judge's objects the worker may use, by class name: the attributes and methods it may read or call ("*": every
-# attribute that is not callable, as for a config); anything else crosses as a handle it can only pass back
+# attribute that is not callable, as for a config; "__call__": the object itself may be called); anything else
+# crosses as a handle it can only pass back
 EXPOSED = {
     "ActorCritic": {"forward", "backward", "distribution", "policy_output", "value", "params", "grads", "log_std",
                     "grad_log_std", "kind", "obs_dim", "act_dim", "hidden_sizes", "shared", "nets"},
@@ -56,6 +57,10 @@ EXPOSED = {
                      "kl_backward", "mode"},
     "Adam": {"step", "lr", "params", "m", "v", "t", "beta1", "beta2", "eps", "bias_correction"},
     "RecordingSGD": {"step", "lr", "params", "received"},
+    # chapter 10's rollout: the snapshot policy, the environments and the normaliser (called as a function) it is given
+    "SnapshotPolicy": {"sample", "log_prob", "value"},
+    "WatchedEnv": {"step", "reset"},
+    "WatchedNormalizer": {"__call__", "update"},
     "Generator": {"permutation", "shuffle", "integers", "random", "normal", "uniform", "choice", "standard_normal"},
     "Config": "*",
 }  # fmt: skip
@@ -73,7 +78,8 @@ LIBRARY_ANSWERS = {
     "ch08_shared_network": {"minippo.losses": ["value_loss"]},
     "ch09_kl_penalty": {"minippo.losses": ["kl_penalty_objective", "adaptive_beta"],
                         "minippo.distributions": ["Categorical"]},
-    "ch10_ppo_update": {"minippo.ppo": ["loss_and_grad", "update_minibatch", "Trainer", "train"]},
+    "ch10_ppo_update": {"minippo.ppo": ["loss_and_grad", "update_minibatch", "Trainer", "train"],
+                        "minippo.rollout": ["Rollout"]},
     "ch12_pixels": {"minippo.conv": ["conv2d_forward", "conv2d_backward"]},
     "ch13_language_model": {"minippo.reward_model": ["bradley_terry_loss", "RewardModel"],
                             "minippo.rlhf": ["kl_shaped_rewards", "train_rlhf"]},
@@ -391,6 +397,12 @@ class Sandbox:
             return not callable(getattr(value, name, None))
         return allowed is not None and name in allowed
 
+    @staticmethod
+    def _allowed_call(value) -> bool:
+        """Whether the worker may call the judge's object itself (an observation normaliser)."""
+        allowed = EXPOSED.get(type(value).__name__)
+        return isinstance(allowed, set) and "__call__" in allowed
+
     def _answer(self, header: dict, blobs: list) -> None:
         try:
             ref, kind = header.get("ref"), header.get("kind")
@@ -413,7 +425,7 @@ class Sandbox:
                 elif callable(value) and not isinstance(value, type):
                     self._callable.add(id(value))
             elif kind == "call":
-                if ref not in self._callable:
+                if ref not in self._callable and not self._allowed_call(target):
                     raise TypeError("that object of the grader's cannot be called")
                 args = unpack(header.get("args"), blobs, self._resolve)
                 kwargs = unpack(header.get("kwargs"), blobs, self._resolve)

@@ -1,8 +1,10 @@
-"""Chapter 10: everything together. Algorithm 1's "optimise the surrogate for K epochs with minibatches of size M",
-assembled from the pieces of the earlier chapters.
+"""Chapter 10: everything together. Algorithm 1's "run policy π_θold in the environment for T timesteps" (collect)
+and its "optimise the surrogate for K epochs with minibatches of size M" (loss_and_grad, ppo_update), assembled from
+the pieces of the earlier chapters.
 
-The rest of Algorithm 1 (running π_θold for T steps, computing Â with GAE) is minippo's: the grading test runs
-minippo's rollout and advantages around your update, and your update must make CartPole-v1 learn.
+collect is graded on small scripted environments whose episodes end at known steps, then against minippo's own
+rollout on CartPole-v1. For the update, the grading test runs minippo's rollout and advantages around your
+ppo_update, and your update must make CartPole-v1 learn.
 
 The agent is a ``minippo.agent.ActorCritic``, whose parameters live in one flat vector ``agent.params`` with the
 gradient in ``agent.grads``:
@@ -24,7 +26,7 @@ import numpy as np
 from minippo import losses
 from minippo.optimizer import clip_grad_norm
 
-EXERCISES = ["loss_and_grad", "ppo_update"]
+EXERCISES = ["loss_and_grad", "ppo_update", "collect"]
 
 
 def loss_and_grad(agent, minibatch: dict, config) -> float:
@@ -94,3 +96,100 @@ def ppo_update(agent, optimizer, data: dict, config, rng: np.random.Generator) -
             optimizer.step(agent.grads)
             steps += 1
     return steps
+
+
+def collect(policy, envs, obs_normalizer, raw_obs, horizon: int, action_bounds=None) -> dict:
+    """Run the snapshot policy π_θold for T = horizon steps in each of the N = len(envs) environments and return the
+    batch (Algorithm 1's "run policy π_θold in the environment for T timesteps"; minippo's Rollout.collect, without
+    the reward scaling that minippo applies to the batch afterwards).
+
+    policy: π_θold and its value function V, frozen for the whole call:
+        policy.sample(o)            o: the (N, obs_dim) normalised observations of one step -> the N actions drawn
+                                    from π_θold: (N,) int64, or (N, act_dim) float64 for continuous actions. Every
+                                    call draws the next step's random numbers: call it once per step, with all N.
+        policy.log_prob(o, a)       o (..., obs_dim), a (...) or (..., act_dim) -> log π_θold(a|o), shape (...)
+        policy.value(o)             o (..., obs_dim) -> V(o), shape (...)
+    envs: N environments with Gymnasium's API, each in the middle of an episode:
+        env.step(action) -> (observation, reward, terminated, truncated, info)
+        env.reset() -> (observation, info)       call it, without arguments, right after a step that ended the
+                                                 episode (terminated or truncated), and never otherwise
+    obs_normalizer: obs_normalizer(s) -> the normalised observations, same shape as s (..., obs_dim);
+        obs_normalizer.update(s) folds the raw observations s into its running mean and variance (chapter 10).
+    raw_obs: (N, obs_dim) s_0, the raw (unnormalised) observations the environments are at; leave it unchanged.
+    action_bounds: None, or (low, high), two arrays of shape (act_dim,): the environments then get
+        np.clip(a_t, low, high), while the batch keeps a_t as it was sampled.
+
+    For t = 0 … T−1:  o_t = obs_normalizer(s_t);  a_t = policy.sample(o_t);  each environment i steps with its
+    action a_t[i] (clipped, with action_bounds) and returns r_t and its flags; s_{t+1}[i] is the observation it
+    returned, or, if the step ended the episode, the one env.reset() returned.
+        logp[t] = log π_θold(a_t|o_t)        of a_t as sampled, never of the clipped action the environment got
+        values[t] = V(o_t)
+        terminated[t, i] = the step's terminated;  truncated[t, i] = its truncated and not terminated (a step that
+            reports both counts as a termination)
+        next_values[t, i] = 0                                  where terminated[t, i]: nothing follows
+                          = V(obs_normalizer(final))           where truncated[t, i]: final is the observation that
+                                                               step returned, before the reset (a time limit is not
+                                                               a terminal state: bootstrap from it)
+                          = V(o_{t+1}), with V(o_T) = V(obs_normalizer(s_T)) after the last step, elsewhere
+    (minippo's Batch keeps V of the next episode's first observation where an episode terminated, which GAE
+    multiplies by 0; here it is 0.)
+    The statistics: every observation of the call (s_0 … s_T and the final observations) is normalised with the
+    statistics obs_normalizer had when the call began. Call obs_normalizer.update once, last, after every
+    observation has been normalised, with the T·N raw observations the policy acted on, s_0 … s_{T−1}, as one array
+    of shape (T·N, obs_dim) or (T, N, obs_dim) (rows in any order): not s_T, not the final observations. The next
+    batch is normalised with the new statistics.
+
+    Returns a dict of new arrays:
+        "obs" (T, N, obs_dim) float64            o_t, the normalised observations the policy acted on
+        "actions" (T, N) int64 or (T, N, act_dim) float64     a_t as sampled
+        "logp", "values", "next_values", "rewards" (T, N) float64      rewards r_t as the environments returned them
+        "terminated", "truncated" (T, N) bool
+        "raw_obs" (N, obs_dim) float64           s_T, raw: where the next call starts
+    """
+    T, N = horizon, len(envs)
+    raw = [np.array(raw_obs, dtype=np.float64)]  # s_0 … s_T, one (N, obs_dim) array per step
+    obs, actions = [], []
+    rewards = np.zeros((T, N))
+    terminated = np.zeros((T, N), dtype=bool)
+    truncated = np.zeros((T, N), dtype=bool)
+    finals = {}  # (t, i) -> the normalised final observation of an episode a time limit cut at step t
+    for t in range(T):
+        o = obs_normalizer(raw[t])  # the statistics the whole batch is normalised with
+        a = policy.sample(o)
+        obs.append(o)
+        actions.append(a)
+        sent = a if action_bounds is None else np.clip(a, action_bounds[0], action_bounds[1])
+        following = np.empty_like(raw[t])
+        for i, env in enumerate(envs):
+            observation, reward, term, trunc, _ = env.step(sent[i])
+            rewards[t, i] = reward
+            terminated[t, i] = term
+            truncated[t, i] = trunc and not term
+            if truncated[t, i]:
+                finals[(t, i)] = obs_normalizer(np.asarray(observation, dtype=np.float64))
+            if term or trunc:
+                observation, _ = env.reset()
+            following[i] = observation
+        raw.append(following)
+    obs, actions = np.array(obs, dtype=np.float64), np.array(actions)
+    flat = obs.reshape(T * N, -1)
+    logp = policy.log_prob(flat, actions.reshape(T * N, *actions.shape[2:])).reshape(T, N)
+    values = policy.value(flat).reshape(T, N)
+    next_values = np.empty((T, N))
+    next_values[:-1] = values[1:]
+    next_values[-1] = policy.value(obs_normalizer(raw[T]))
+    for (t, i), final in finals.items():
+        next_values[t, i] = policy.value(final)
+    next_values[terminated] = 0.0
+    obs_normalizer.update(np.array(raw[:T]).reshape(T * N, -1))  # last: s_0 … s_{T−1}, what the policy acted on
+    return {
+        "obs": obs,
+        "actions": actions,
+        "logp": np.asarray(logp, dtype=np.float64),
+        "values": np.asarray(values, dtype=np.float64),
+        "next_values": next_values,
+        "rewards": rewards,
+        "terminated": terminated,
+        "truncated": truncated,
+        "raw_obs": raw[T].copy(),
+    }

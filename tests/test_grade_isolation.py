@@ -232,6 +232,38 @@ def test_the_worker_reaches_only_the_exposed_attributes_of_the_judge_s_objects(t
         box.close()
 
 
+def test_the_worker_calls_a_judge_object_itself_only_where_exposed_lists_call(tmp_path):
+    folder = make_folder(
+        tmp_path,
+        """
+        def call(thing, x):
+            return thing(x)
+        """,
+        "ch10_ppo_update",
+    )
+    from minippo.ppo import Config
+
+    class WatchedNormalizer:  # chapter 10's normaliser, which EXPOSED lists with __call__
+        def __init__(self):
+            self.seen = []
+
+        def __call__(self, x):
+            self.seen.append(x.copy())
+            return 2.0 * x
+
+    box = sandbox.Sandbox(folder)
+    try:
+        assert box.load("ch10_ppo_update") is None
+        normalizer = WatchedNormalizer()
+        assert np.array_equal(box.call("ch10_ppo_update", "call", (normalizer, np.ones(2)), {}), [2.0, 2.0])
+        assert len(normalizer.seen) == 1  # the call ran here, in the judge's process
+        with pytest.raises(sandbox.StudentRaised) as raised:
+            box.call("ch10_ppo_update", "call", (Config(), np.ones(2)), {})
+        assert "cannot be called" in str(raised.value)
+    finally:
+        box.close()
+
+
 def test_the_worker_cannot_import_the_reference_or_reach_the_repository(tmp_path):
     folder = make_folder(
         tmp_path,

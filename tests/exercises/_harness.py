@@ -108,7 +108,7 @@ def describe_value(value) -> str:
     if isinstance(value, (list, tuple)):
         inner = ", ".join(describe_value(item) for item in value[:4]) + (", ..." if len(value) > 4 else "")
         return f"[{inner}]" if isinstance(value, list) else f"({inner})"
-    if isinstance(value, (bool, int, float, np.number)):
+    if value is None or isinstance(value, (bool, int, float, np.number)):
         return repr(value.item() if isinstance(value, np.number) else value)
     return type(value).__name__
 

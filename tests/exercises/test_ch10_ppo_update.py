@@ -1,23 +1,32 @@
 """Grading chapter 10: the assembled loss against its definition and finite differences at several configurations
 (ε, c1, c2, advantage normalisation on and off), the epoch and minibatch loop (the number of steps, the exact order of
-the rows with and without shuffling from the rng passed in, the gradient clip, each minibatch's own gradient), and
-finally PPO learning CartPole-v1 with your update inside minippo's rollout, a backstop rather than the evidence.
+the rows with and without shuffling from the rng passed in, the gradient clip, each minibatch's own gradient), the
+rollout (collect) on scripted environments whose episodes end at known steps (one step, several, clipped continuous
+actions, terminations, truncations, both at once, two batches in a row) and then against minippo's own rollout on
+CartPole-v1, and finally PPO learning CartPole-v1 with your update inside minippo's rollout, a backstop rather than
+the evidence.
 
 Tests run from the most specific to the most general, so the first failure names the mistake."""
 
+import copy
 import dataclasses
 import time
 
 import _harness
 import numpy as np
 import pytest
-from _harness import call_checking_inputs, check_close, check_scalar, numerical_gradient, where_is_ratio
+from _harness import call_checking_inputs, check_array, check_close, check_scalar, numerical_gradient, where_is_ratio
+from gymnasium.wrappers import TimeLimit
 
 from minippo import losses
 from minippo.agent import ActorCritic
+from minippo.distributions import sample_categorical
+from minippo.envs import make_env
+from minippo.normalization import ObservationNormalizer, RewardScaler
 from minippo.optimizer import linear_schedule
 from minippo.ppo import Config, Trainer, compute_advantages, flatten
 from minippo.presets import CARTPOLE_PPO
+from minippo.rollout import Rollout
 
 student = _harness.student  # the fixture: the implementation under test (see _harness.py)
 pytest_generate_tests = _harness.pytest_generate_tests  # one run per wrong variant under MINIPPO_IMPL=wrong
@@ -461,6 +470,607 @@ def test_ppo_update_on_one_full_batch_takes_one_gradient_step(student):
         where=describe_parameter(agent, optimizer.received[0], expected),
     )
     check_close(agent.params, before - 0.01 * expected, "ppo_update", "the parameters after one step", 1e-5, 1e-9)
+
+
+# The rollout: collect on scripted environments whose episodes end at known steps, then against minippo's own.
+
+
+class SnapshotPolicy:
+    """π_θold and V of an ActorCritic, for one batch of T steps in N environments. Its random numbers are drawn when it
+    is made, as minippo's Rollout.collect draws them (uniforms (T, N) for a categorical policy, standard normals
+    (T, N, act_dim) for a Gaussian), and its t-th sample call uses step t's."""
+
+    def __init__(self, agent, rng, horizon, num_envs, log=None):
+        self.agent, self.horizon, self.num_envs = agent, horizon, num_envs
+        self.log = [] if log is None else log
+        self.calls = 0
+        if agent.kind == "continuous":
+            noise = rng.standard_normal((horizon, num_envs, agent.act_dim))
+            self.draws = (np.exp(agent.log_std) * noise).astype(agent.dtype)
+        else:
+            self.draws = rng.random((horizon, num_envs))
+
+    def actions_for(self, t, obs):
+        """What the t-th sample call returns for the (N, obs_dim) observations ``obs``."""
+        out = self.agent.policy_output(np.asarray(obs, dtype=np.float64))
+        if self.agent.kind == "continuous":
+            return out + self.draws[t]
+        return sample_categorical(out, self.draws[t])
+
+    def sample(self, obs):
+        obs = np.array(obs, dtype=np.float64)
+        shape = (self.num_envs, self.agent.obs_dim)
+        if obs.shape != shape:
+            raise ValueError(
+                f"policy.sample takes the normalised observations of one step of all N = {self.num_envs} "
+                f"environments at once, an array of shape {shape}, not {obs.shape}"
+            )
+        if self.calls == self.horizon:
+            raise ValueError(f"policy.sample was called more than T = {self.horizon} times: call it once per step")
+        self.log.append(("sample", self.calls, obs))
+        self.calls += 1
+        return self.actions_for(self.calls - 1, obs)
+
+    def _observations(self, obs, what):
+        obs = np.asarray(obs, dtype=np.float64)
+        if obs.ndim == 0 or obs.shape[-1] != self.agent.obs_dim:
+            raise ValueError(f"policy.{what} takes observations of shape (..., {self.agent.obs_dim}), not {obs.shape}")
+        return obs
+
+    def log_prob(self, obs, actions):
+        obs = self._observations(obs, "log_prob")
+        actions = np.asarray(actions)
+        continuous = self.agent.kind == "continuous"
+        shape = obs.shape[:-1] + ((self.agent.act_dim,) if continuous else ())
+        if actions.shape != shape:
+            raise ValueError(
+                f"policy.log_prob: observations of shape {obs.shape} go with actions of shape {shape}, not "
+                f"{actions.shape}"
+            )
+        flat = obs.reshape(-1, self.agent.obs_dim)
+        dist = self.agent.distribution(self.agent.policy_output(flat))
+        chosen = actions.reshape(len(flat), -1) if continuous else actions.reshape(-1)
+        return dist.log_prob(chosen).reshape(obs.shape[:-1])
+
+    def value(self, obs):
+        obs = self._observations(obs, "value")
+        return self.agent.value(obs.reshape(-1, self.agent.obs_dim)).reshape(obs.shape[:-1])
+
+
+class ScriptedEnv:
+    """An environment whose episodes end at known steps: ``ends`` maps the number of steps it has taken before (over
+    its whole life, 0, 1, …) to how that step ends its episode: "terminated", "truncated" or "both". Its observations
+    do not depend on the actions; each is made of its index, its episode and the step within the episode, so that no
+    two are alike (the final observation of an episode differs from the next one's first). Every step's reward differs
+    too."""
+
+    def __init__(self, index, ends):
+        self.index, self.ends = index, dict(ends)
+        self.steps = self.episode = self.step_in_episode = 0
+
+    def observation(self):
+        i, k, j = self.index, self.episode, self.step_in_episode
+        return np.array([0.6 * j - 1.0 + 0.25 * i, 0.9 * k - 0.5 - 0.3 * i, 0.2 * j - 0.35 * k + 0.4 * i])
+
+    def step(self, action):
+        end = self.ends.get(self.steps)
+        reward = 1.0 + 0.125 * self.steps + 0.5 * self.index
+        self.steps += 1
+        self.step_in_episode += 1
+        return self.observation(), reward, end in ("terminated", "both"), end in ("truncated", "both"), {}
+
+    def reset(self):
+        self.episode += 1
+        self.step_in_episode = 0
+        return self.observation(), {}
+
+
+class WatchedEnv:
+    """An environment as the graded code sees it: step and reset, each call written to the shared log."""
+
+    def __init__(self, env, index, log):
+        self.env, self.index, self.log = env, index, log
+
+    def step(self, action):
+        self.log.append(("step", self.index, np.array(action, dtype=np.float64)))
+        return self.env.step(action)
+
+    def reset(self):
+        self.log.append(("reset", self.index))
+        return self.env.reset()
+
+
+class WatchedNormalizer:
+    """An ObservationNormalizer as the graded code sees it: calling it normalises, update folds raw observations into
+    its statistics; both are written to the shared log."""
+
+    def __init__(self, normalizer, log):
+        self.normalizer, self.log = normalizer, log
+
+    def __call__(self, raw):
+        raw = np.array(raw, dtype=np.float64)
+        self.log.append(("normalise", raw.copy()))
+        return self.normalizer(raw)
+
+    def update(self, raw):
+        raw = np.array(raw, dtype=np.float64)
+        self.log.append(("update", raw.copy()))
+        self.normalizer.update(raw)
+
+
+ROLLOUT_KEYS = ("obs", "actions", "logp", "values", "next_values", "rewards", "terminated", "truncated", "raw_obs")
+OBS_DIM = 3
+
+
+def scripted_normalizer():
+    """An ObservationNormalizer whose statistics are far from 0 and 1, so that normalising changes every number."""
+    normalizer = ObservationNormalizer((OBS_DIM,))
+    normalizer.stats.mean = np.array([0.4, 0.3, -0.2])
+    normalizer.stats.var = np.array([2.5, 0.6, 1.8])
+    normalizer.stats.count = 40.0
+    normalizer.refresh()
+    return normalizer
+
+
+def show(value) -> str:
+    value = np.asarray(value, dtype=np.float64)
+    if value.ndim == 0:
+        return f"{float(value):.6g}"
+    return " ".join(np.array2string(value, precision=4, suppress_small=True).split())
+
+
+class Scene:
+    """N scripted environments (``ends``, one dict per environment), an agent, its normaliser and its random numbers,
+    for batches of T steps in a row; ``expect`` works out each batch from the script, ``run`` grades one."""
+
+    def __init__(self, ends, horizon, kind="discrete", bounds=None, seed=0):
+        self.T, self.N, self.bounds = horizon, len(ends), bounds
+        act_dim = 2 if kind == "continuous" else 3
+        self.agent = ActorCritic(
+            OBS_DIM, kind, act_dim, (8, 8), log_std_init=0.3, rng=np.random.default_rng(seed), dtype="float64"
+        )
+        self.rng, self.replay = np.random.default_rng(seed + 1), np.random.default_rng(seed + 1)
+        self.envs = [ScriptedEnv(i, e) for i, e in enumerate(ends)]
+        self.twins = [ScriptedEnv(i, e) for i, e in enumerate(ends)]  # the same course, stepped by the tests
+        self.normalizer, self.twin_normalizer = scripted_normalizer(), scripted_normalizer()
+        self.raw_obs = np.stack([env.observation() for env in self.envs])
+        self.batches = 0
+
+    def expect(self) -> dict:
+        """The batch as the contract defines it, worked out from the script, with the usual mistakes beside it."""
+        T, N = self.T, self.N
+        s = np.empty((T + 1, N, OBS_DIM))  # s_0 … s_T
+        s[0] = [twin.observation() for twin in self.twins]
+        final = np.empty((T, N, OBS_DIM))  # what each step returned, before any reset
+        rewards, terminated, truncated, both = np.zeros((T, N)), *np.zeros((3, T, N), dtype=bool)
+        for t in range(T):
+            for i, twin in enumerate(self.twins):
+                final[t, i], rewards[t, i], term, trunc, _ = twin.step(None)
+                terminated[t, i], truncated[t, i], both[t, i] = term, trunc and not term, term and trunc
+                s[t + 1, i] = twin.reset()[0] if term or trunc else final[t, i]
+        normalize, policy = self.twin_normalizer, SnapshotPolicy(self.agent, self.replay, T, N)
+        updated = copy.deepcopy(normalize)
+        updated.update(s[:T].reshape(-1, OBS_DIM))
+        o = normalize(s)
+        actions = np.stack([policy.actions_for(t, o[t]) for t in range(T)])
+        clipped = actions if self.bounds is None else np.clip(actions, *self.bounds)
+        V, V_final = policy.value(o), policy.value(normalize(final))
+        ended = terminated | truncated
+        self.twin_normalizer = updated
+        return {
+            "obs": o[:T],
+            "actions": actions,
+            "logp": policy.log_prob(o[:T], actions),
+            "values": V[:T],
+            "next_values": np.where(terminated, 0.0, np.where(truncated, V_final, V[1:])),
+            "rewards": rewards,
+            "terminated": terminated,
+            "truncated": truncated,
+            "raw_obs": s[T],
+            # what the mistakes give
+            "s": s,
+            "final": final,
+            "ended": ended,
+            "both": both,
+            "clipped": clipped,
+            "logp_clipped": policy.log_prob(o[:T], clipped),
+            "o": o,
+            "o_updated": updated(s),
+            "V": V,
+            "V_final": V_final,
+            "o_final": normalize(final),
+            "V_updated": policy.value(updated(s)),
+            "V_final_updated": policy.value(updated(final)),
+        }
+
+    def describe(self, want, t, i) -> str:
+        where = f"step t = {t} of environment {i}"
+        if want["both"][t, i]:
+            where += ", which reported both terminated and truncated"
+        elif want["terminated"][t, i]:
+            where += ", where its episode terminated"
+        elif want["truncated"][t, i]:
+            where += ", where a time limit truncated its episode"
+        return where + (", the batch's last step" if t == self.T - 1 else "")
+
+    def run(self, student) -> dict:
+        """Grade one batch: the calls collect made (to the policy, the environments and the normaliser), then what it
+        returned. Returns the expected batch."""
+        self.batches += 1
+        T, N, log = self.T, self.N, []
+        policy = SnapshotPolicy(self.agent, self.rng, T, N, log)
+        envs = [WatchedEnv(env, i, log) for i, env in enumerate(self.envs)]
+        raw_obs = self.raw_obs.copy()
+        result = student.collect(policy, envs, WatchedNormalizer(self.normalizer, log), raw_obs, T, self.bounds)
+        assert np.array_equal(raw_obs, self.raw_obs), (
+            "collect changed its input raw_obs in place: copy it (np.array(raw_obs, dtype=np.float64)) and work on "
+            "the copy"
+        )
+        want = self.expect()
+        self.check_calls(log, want)
+        self.check_result(result, want, raw_obs)
+        self.raw_obs = want["raw_obs"]
+        return want
+
+    def check_calls(self, log, want) -> None:
+        T, N = self.T, self.N
+        batch = f" (batch {self.batches})" if self.batches > 1 else ""
+        updates = [k for k, event in enumerate(log) if event[0] == "update"]
+        steps = [k for k, event in enumerate(log) if event[0] == "step"]
+        assert updates, (
+            f"collect: obs_normalizer.update was never called{batch}: call it once, after the last step, with the "
+            "raw observations s_0 … s_{T−1} the policy acted on"
+        )
+        if len(updates) > 1:
+            after = [sum(1 for k in steps if k < u) // N - 1 for u in updates]
+            raise AssertionError(
+                f"collect: obs_normalizer.update was called {len(updates)} times{batch} (after steps "
+                f"{', '.join(str(t) for t in after[:6])}{', …' if len(after) > 6 else ''}): the statistics were "
+                "updated mid-rollout, so the batch's observations were normalised with different statistics; call it "
+                "once, last"
+            )
+        update = updates[0]
+        if steps and update < steps[-1]:
+            done = sum(1 for k in steps if k < update) // N
+            raise AssertionError(
+                f"collect: obs_normalizer.update was called before the batch ended{batch} (after {done} of its "
+                f"T = {T} steps): the steps after it were normalised with other statistics; call it once, last"
+            )
+        late = [event[1] for event in log[update + 1 :] if event[0] == "normalise"]
+        if late:
+            raise AssertionError(
+                f"collect: obs_normalizer was called (on {show(late[0])}) after obs_normalizer.update{batch}: what it "
+                "normalised then (s_T, or a truncated episode's final observation, for a bootstrap value) saw the "
+                "updated statistics instead of the batch's; normalise everything first and update the statistics last"
+            )
+        for i in range(N):
+            mine = [event for event in log if event[0] in ("step", "reset") and event[1] == i]
+            t = 0
+            for k, event in enumerate(mine):
+                if event[0] == "reset":
+                    if t == 0 or t > T or not want["ended"][t - 1, i] or mine[k - 1][0] == "reset":
+                        when = "before its first step" if t == 0 else f"after step t = {t - 1}"
+                        raise AssertionError(
+                            f"collect: environment {i} was reset {when}{batch}, where its episode had not ended: "
+                            "call env.reset() only right after a step that returned terminated or truncated"
+                        )
+                    continue
+                if 0 < t <= T and want["ended"][t - 1, i] and mine[k - 1][0] != "reset":
+                    how = "terminated" if want["terminated"][t - 1, i] else "truncated"
+                    raise AssertionError(
+                        f"collect: environment {i}'s episode ended at step t = {t - 1} ({how}){batch}, but it was "
+                        f"stepped again at step {t} without env.reset(): reset it right after a step that returned "
+                        "terminated or truncated, and go on from the observation reset returns"
+                    )
+                t += 1
+            assert t == T, (
+                f"collect: environment {i} took {t} steps in a batch of T = {T}{batch}: every environment takes one "
+                "step per step of the batch"
+            )
+            if want["ended"][T - 1, i]:
+                assert mine[-1][0] == "reset", (
+                    f"collect: environment {i}'s episode ended at the batch's last step{batch}, but it was not reset: "
+                    "reset it, so that the next batch starts from the new episode's first observation"
+                )
+        samples = [event for event in log if event[0] == "sample"]
+        assert len(samples) == T, (
+            f"collect: policy.sample was called {len(samples)} times in a batch of T = {T} steps: call it once per "
+            "step, with the N observations of that step"
+        )
+        for _, t, given in samples:
+            wrong = ~np.all(np.isclose(given, want["obs"][t], rtol=1e-9, atol=1e-12), axis=-1)
+            if wrong.any():
+                i = int(np.argmax(wrong))
+                guess = ""
+                if np.allclose(given[i], want["s"][t, i]):
+                    guess = ": the raw observation s_t; the policy acts on o_t = obs_normalizer(s_t)"
+                elif np.allclose(given[i], want["o_updated"][t, i]):
+                    guess = ": normalised with statistics updated during the batch"
+                elif t > 0 and want["ended"][t - 1, i] and np.allclose(given[i], want["o_final"][t - 1, i]):
+                    guess = (
+                        ": the final observation of the episode that ended at step t − 1; after env.reset(), go on "
+                        "from the observation reset returns"
+                    )
+                raise AssertionError(
+                    f"collect: policy.sample at step t = {t}{batch} got {show(given[i])} for environment {i}, not "
+                    f"o_t = obs_normalizer(s_t) = {show(want['obs'][t, i])} (s_t = {show(want['s'][t, i])}){guess}"
+                )
+        for i in range(N):
+            given_actions = [event[2] for event in log if event[0] == "step" and event[1] == i]
+            for t, action in enumerate(given_actions):
+                expected = want["clipped"][t, i]
+                if not np.allclose(action, expected, rtol=1e-9, atol=1e-12):
+                    guess = ""
+                    if self.bounds is not None and np.allclose(action, want["actions"][t, i]):
+                        guess = (
+                            ": the action as sampled; with action_bounds the environment gets np.clip(a_t, low, high)"
+                        )
+                    raise AssertionError(
+                        f"collect: environment {i} was given the action {show(action)} at step t = {t}{batch}, "
+                        f"not {show(expected)} (a_t[{i}] of policy.sample(o_t)"
+                        f"{', clipped to action_bounds' if self.bounds is not None else ''}){guess}"
+                    )
+        given = log[update][1]
+        rows = given.reshape(-1, OBS_DIM) if given.size % OBS_DIM == 0 else given
+        acted = want["s"][:T].reshape(-1, OBS_DIM)
+        if rows.shape == acted.shape and np.allclose(np.sort(rows, axis=0), np.sort(acted, axis=0), 1e-12, 1e-12):
+            return
+        candidates = {
+            "s_1 … s_T, the observations after each step, not s_0 … s_{T−1}, the ones the policy acted on": want["s"][
+                1:
+            ],
+            "the normalised observations o_t; the statistics are of the raw observations": want["obs"],
+            "s_0 … s_T, s_T included; only the T·N observations the policy acted on": want["s"],
+        }
+        extra = want["final"][want["truncated"]]
+        if len(extra):
+            candidates["s_0 … s_{T−1} with the final observations of the truncated episodes; only what the policy "
+                       "acted on"] = np.concatenate([acted, extra])  # fmt: skip
+        named = ""
+        for words, rows_of in candidates.items():
+            rows_of = np.asarray(rows_of).reshape(-1, OBS_DIM)
+            if rows.shape == rows_of.shape and np.allclose(np.sort(rows, axis=0), np.sort(rows_of, axis=0)):
+                named = f": {words}?"
+        raise AssertionError(
+            f"collect: obs_normalizer.update{batch} should get the T·N = {T * N} raw observations s_0 … s_{{T−1}} "
+            f"the policy acted on, as an array of shape ({T * N}, {OBS_DIM}) or ({T}, {N}, {OBS_DIM}), not the array "
+            f"of shape {given.shape} it got{named}"
+        )
+
+    def check_result(self, result, want, raw_obs) -> None:
+        T, N = self.T, self.N
+        batch = f" of batch {self.batches}" if self.batches > 1 else ""
+        assert isinstance(result, dict), (
+            f"collect: it should return a dict with the keys {', '.join(ROLLOUT_KEYS)}, not {type(result).__name__}"
+        )
+        missing = [key for key in ROLLOUT_KEYS if key not in result]
+        assert not missing, f"collect: the dict it returns lacks the key(s) {', '.join(missing)}"
+        check_rollout_arrays(result, want, T, N, raw_obs)
+
+        def entries(name, alternatives=()):
+            check_entries(result[name], want[name], name, lambda t, i: self.describe(want, t, i) + batch, alternatives)
+
+        entries("obs", {"the raw observation s_t; store o_t = obs_normalizer(s_t)": want["s"][:T]})
+        entries("actions", {"the clipped action; store a_t as policy.sample returned it": want["clipped"]})
+        entries("rewards")
+        for name in ("terminated", "truncated"):
+            flags = result[name]
+            wrong = flags != want[name]
+            if wrong.any():
+                t, i = (int(x) for x in np.argwhere(wrong)[0])
+                why = ""
+                if want["both"][t, i]:
+                    why = ": a step that reports both terminated and truncated counts as terminated (nothing follows)"
+                raise AssertionError(
+                    f"collect: {name}[{t}, {i}] ({self.describe(want, t, i)}{batch}) should be "
+                    f"{bool(want[name][t, i])}, not {bool(flags[t, i])}{why}"
+                )
+        entries(
+            "logp",
+            {"log π_θold of the clipped action sent to the environment, not of a_t as sampled": want["logp_clipped"]},
+        )
+        entries("values", {"V of the raw observation s_t; V(o_t) takes the normalised one": self.raw_values(want)})
+        T1 = np.arange(T) == T - 1
+        V_next_later = np.where(T1[:, None], want["V"][T], want["V"][np.minimum(np.arange(T) + 2, T)])
+        at_truncation = np.where(want["truncated"], 1.0, np.nan)  # a mistake named only where it shows
+        at_termination = np.where(want["terminated"], 1.0, np.nan)
+        entries(
+            "next_values",
+            {
+                "0 where a time limit truncated the episode: no bootstrap at a truncation, but a time limit is not a "
+                "terminal state; bootstrap from V of the final observation the step returned": 0.0 * at_truncation,
+                "V of the final observation where the episode terminated: a bootstrap at a termination, where nothing "
+                "follows (0)": want["V_final"] * at_termination,
+                "V of the observation env.reset() returned (the next episode's first), not of the final observation "
+                "the step returned; keep that one before resetting": want["V"][1:] * at_truncation,
+                "V of the observation env.reset() returned (the next episode's first) where the episode terminated: "
+                "nothing follows a terminal state, so next_values is 0 there (minippo's Batch keeps that value, which "
+                "GAE multiplies by 0; the contract asks for 0)": want["V"][1:] * at_termination,
+                "V(o_t), the value of the step's own observation (off by one): next_values[t] is V(o_{t+1})": want[
+                    "values"
+                ],
+                "V(o_{t+2}) (off by one)": V_next_later,
+                "normalised with the statistics updated by this batch; normalise with the batch's statistics, then "
+                "update": np.where(want["truncated"], want["V_final_updated"], want["V_updated"][1:]),
+            },
+        )
+        got = result["raw_obs"]
+        if not np.allclose(got, want["raw_obs"], rtol=1e-12, atol=1e-12):
+            i = int(np.argmax(~np.all(np.isclose(got, want["raw_obs"], 1e-12, 1e-12), axis=-1)))
+            guess = ""
+            if np.allclose(got[i], want["s"][T - 1, i]):
+                guess = ": s_{T−1}, the observation of the last step, not the one after it"
+            elif np.allclose(got[i], want["final"][T - 1, i]):
+                guess = ": the final observation of the episode that ended at the last step, not the one reset returned"
+            elif np.allclose(got[i], want["o_updated"][T, i]) or np.allclose(got[i], want["o"][T, i]):
+                guess = ": a normalised observation; raw_obs holds the raw s_T"
+            raise AssertionError(
+                f"collect: raw_obs{batch} should be s_T, the raw observation each environment is at after the batch; "
+                f"for environment {i} it is {show(got[i])}, not {show(want['raw_obs'][i])}{guess}"
+            )
+
+    def raw_values(self, want):
+        return SnapshotPolicy(self.agent, np.random.default_rng(0), self.T, self.N).value(want["s"][: self.T])
+
+
+def check_rollout_arrays(result, want, T, N, raw_obs=None) -> None:
+    """Every array of the batch has the contract's shape and dtype, and none is one of the inputs."""
+    for name in ("obs", "logp", "values", "next_values", "rewards", "raw_obs"):
+        check_array(result[name], "collect", want[name].shape, f'the batch\'s "{name}"')
+    actions = result["actions"]
+    assert isinstance(actions, np.ndarray) and actions.shape == want["actions"].shape, (
+        f'collect: the batch\'s "actions" should be an array of shape {want["actions"].shape} (a_t as '
+        f"policy.sample returned them), not {getattr(actions, 'shape', type(actions).__name__)}"
+    )
+    assert actions.dtype == want["actions"].dtype, (
+        f'collect: the batch\'s "actions" should be {want["actions"].dtype}, as policy.sample returns them, not '
+        f"{actions.dtype}"
+    )
+    for name in ("terminated", "truncated"):
+        flags = result[name]
+        assert isinstance(flags, np.ndarray) and flags.shape == (T, N) and flags.dtype == bool, (
+            f'collect: the batch\'s "{name}" should be a bool array of shape {(T, N)}, not '
+            f"{getattr(flags, 'dtype', type(flags).__name__)} {getattr(flags, 'shape', '')}"
+        )
+    if raw_obs is not None:
+        for name in ROLLOUT_KEYS:
+            assert not np.shares_memory(result[name], raw_obs), (
+                f'collect: the batch\'s "{name}" is the input raw_obs (or a view of it): return a new array'
+            )
+
+
+def check_entries(got, want, name, describe, alternatives=(), rtol=1e-9, atol=1e-12) -> None:
+    """``got`` equals ``want`` entry by entry, or the test fails at the earliest step (then environment) where they
+    differ, saying where that is and which of ``alternatives`` (words: what a mistake gives) the entry equals."""
+    got, want = np.asarray(got, dtype=np.float64), np.asarray(want, dtype=np.float64)
+    close = np.isclose(got, want, rtol=rtol, atol=atol)
+    wrong = ~close.reshape(close.shape[:2] + (-1,)).all(axis=-1)
+    if not wrong.any():
+        return
+    t, i = (int(x) for x in np.argwhere(wrong)[0])
+    named = [
+        words
+        for words, value in dict(alternatives).items()
+        if np.allclose(got[t, i], np.asarray(value)[t, i], rtol=rtol, atol=atol)
+        and not np.allclose(want[t, i], np.asarray(value)[t, i], rtol=rtol, atol=atol)
+    ]
+    raise AssertionError(
+        f"collect: {name}[{t}, {i}] ({describe(t, i)}) should be {show(want[t, i])}, not {show(got[t, i])}"
+        + (": " + " Or ".join(f"{words}?" for words in named) if named else "")
+    )
+
+
+def test_collect_one_step_in_one_environment(student):
+    Scene([{}], horizon=1).run(student)
+
+
+def test_collect_several_steps_in_several_environments(student):
+    Scene([{}, {}, {}], horizon=5, seed=1).run(student)
+
+
+def test_collect_clips_only_what_the_environments_get(student):
+    bounds = (np.array([-0.5, -0.2]), np.array([0.5, 0.9]))
+    Scene([{}, {}], horizon=4, kind="continuous", bounds=bounds, seed=2).run(student)
+
+
+def test_collect_at_terminations(student):
+    # an episode that terminates mid-batch, one at the first step and at the last, one that lasts a single step
+    ends = [{2: "terminated"}, {0: "terminated", 6: "terminated"}, {3: "terminated", 4: "terminated"}]
+    Scene(ends, horizon=7, seed=3).run(student)
+
+
+def test_collect_at_truncations(student):
+    # a time limit mid-batch, one at the batch's last step, and truncations around a termination
+    ends = [{2: "truncated"}, {6: "truncated"}, {1: "truncated", 4: "terminated", 5: "truncated"}]
+    Scene(ends, horizon=7, seed=4).run(student)
+
+
+def test_collect_when_a_step_reports_both_flags(student):
+    ends = [{1: "both"}, {2: "truncated", 4: "both"}]
+    Scene(ends, horizon=5, seed=5).run(student)
+
+
+def test_collect_two_batches_in_a_row(student):
+    # the second batch starts where the first ended (raw_obs), with the statistics the first one's update left
+    ends = [{3: "truncated", 8: "terminated"}, {5: "both", 7: "truncated"}, {4: "terminated", 6: "truncated"}]
+    bounds = (np.array([-0.6, -0.6]), np.array([0.6, 0.6]))
+    scene = Scene(ends, horizon=5, kind="continuous", bounds=bounds, seed=6)
+    scene.run(student)
+    scene.run(student)
+
+
+def test_collect_matches_minippo_s_rollout_on_cartpole(student):
+    # three batches of T = 64 steps in N = 4 CartPole-v1 environments with a time limit of 30 steps, so that the
+    # untrained policy's episodes both terminate (the pole falls) and are truncated; the statistics are on
+    T, N, seed, batches = 64, 4, 3, 3
+    agent = ActorCritic(4, "discrete", 2, (64, 64), rng=np.random.default_rng(seed), dtype="float64")
+
+    def environments():
+        return [TimeLimit(make_env("CartPole-v1"), max_episode_steps=30) for _ in range(N)]
+
+    theirs, mine = environments(), environments()
+    scaler = RewardScaler(0.99, enabled=False, num_envs=N)
+    rollout = Rollout(theirs, agent, ObservationNormalizer((4,)), scaler, T, np.random.default_rng(seed), seed)
+    normalizer, rng = ObservationNormalizer((4,)), np.random.default_rng(seed)
+    raw = np.stack([env.reset(seed=seed + i)[0] for i, env in enumerate(mine)]).astype(np.float64)
+    seen = {"terminated": 0, "truncated": 0}
+    try:
+        for b in range(1, batches + 1):
+            batch = rollout.collect()
+            log = []
+            envs = [WatchedEnv(env, i, log) for i, env in enumerate(mine)]
+            policy = SnapshotPolicy(agent, rng, T, N, log)
+            result = student.collect(policy, envs, WatchedNormalizer(normalizer, log), raw, T)
+            assert isinstance(result, dict) and all(key in result for key in ROLLOUT_KEYS), (
+                f"collect: it should return a dict with the keys {', '.join(ROLLOUT_KEYS)}"
+            )
+            theirs_batch = {
+                "obs": batch.obs,
+                "actions": batch.actions,
+                "logp": batch.logp,
+                "values": batch.values,
+                # minippo keeps V of the next episode's first observation where one terminated; the contract, 0
+                "next_values": np.where(batch.terminated, 0.0, batch.next_values),
+                "rewards": batch.rewards,
+                "terminated": batch.terminated,
+                "truncated": batch.truncated,
+                "raw_obs": rollout.raw_obs,
+            }
+            check_rollout_arrays(result, theirs_batch, T, N, raw)
+            for _, t, given in (event for event in log if event[0] == "sample"):
+                check_close(
+                    given,
+                    batch.obs[t],
+                    "collect",
+                    f"the observations policy.sample got at step t = {t} of batch {b} on CartPole-v1 (minippo's o_t)",
+                    rtol=1e-9,
+                    atol=1e-12,
+                )
+
+            def where(t, i, b=b, flags=batch):
+                end = " (terminated there)" if flags.terminated[t, i] else ""
+                end = " (truncated there)" if flags.truncated[t, i] else end
+                return f"CartPole-v1, batch {b}, step t = {t} of environment {i}{end}; the value is minippo's"
+
+            for name in ("obs", "actions", "rewards", "terminated", "truncated", "logp", "values", "next_values"):
+                check_entries(result[name], theirs_batch[name], name, where)
+            check_close(result["raw_obs"], rollout.raw_obs, "collect", f"raw_obs after batch {b} (minippo's s_T)")
+            for stat in ("mean", "var", "count"):
+                check_close(
+                    getattr(normalizer.stats, stat),
+                    getattr(rollout.obs_normalizer.stats, stat),
+                    "collect",
+                    f"the observation statistics' {stat} after batch {b} (minippo's, updated with s_0 … s_(T−1))",
+                    rtol=1e-9,
+                    atol=1e-12,
+                )
+            raw = result["raw_obs"]
+            seen["terminated"] += int(batch.terminated.sum())
+            seen["truncated"] += int(batch.truncated.sum())
+    finally:
+        for env in theirs + mine:
+            env.close()
+    assert seen["terminated"] and seen["truncated"], f"the test's run should hold both kinds of episode end: {seen}"
 
 
 # Algorithm 1 with your update: CartPole-v1 must learn.

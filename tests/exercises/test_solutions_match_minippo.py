@@ -1,10 +1,13 @@
-"""The reference solutions agree with minippo's own functions on random inputs, so the course and the library cannot
-drift apart. (Three exercises have no counterpart in minippo: normalize_advantages and importance_ratio are inline
-expressions there, and clipped_surrogate, the clip without the min, is a teaching step that minippo does not use.)"""
+"""The reference solutions agree with minippo's own functions on random inputs (the rollout, on a real task), so the
+course and the library cannot drift apart. (Three exercises have no counterpart in minippo: normalize_advantages and
+importance_ratio are inline expressions there, and clipped_surrogate, the clip without the min, is a teaching step
+that minippo does not use.)"""
 
 import _harness  # noqa: F401 - puts the repository root (solutions/) on sys.path
 import numpy as np
 import pytest
+from gymnasium.wrappers import TimeLimit
+from test_ch10_ppo_update import SnapshotPolicy
 
 from minippo import advantages as adv
 from minippo import losses
@@ -12,13 +15,16 @@ from minippo.agent import ActorCritic
 from minippo.conv import conv2d_backward, conv2d_forward
 from minippo.distributions import Categorical, DiagGaussian
 from minippo.dpo import dpo_loss
+from minippo.envs import make_env
 from minippo.grpo import group_advantages
 from minippo.network import MLP, linear_backward, tanh_backward
+from minippo.normalization import ObservationNormalizer, RewardScaler
 from minippo.optimizer import Adam
 from minippo.ppo import Config, update_minibatch
 from minippo.ppo import loss_and_grad as minippo_loss_and_grad
 from minippo.reward_model import bradley_terry_loss
 from minippo.rlhf import kl_shaped_rewards
+from minippo.rollout import Rollout
 from solutions import (
     ch01_network,
     ch02_distributions,
@@ -218,6 +224,37 @@ def test_ppo_loss_and_update(seed, kind):
             update_minibatch(twin, twin_adam, {key: value[index] for key, value in minibatch.items()}, config)
     assert steps == config.epochs * 2
     same(agent.params, twin.params, rtol=1e-9)
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_rollout_with_clipped_continuous_actions(seed):
+    # collect beside minippo's Rollout.collect on Pendulum-v1 (actions clipped to ±2, a time limit of 30 steps so that
+    # episodes are truncated inside the batches), two batches, the observation statistics on; chapter 10's grading
+    # test does the same on CartPole-v1, whose actions are discrete
+    T, N = 40, 2
+    agent = ActorCritic(3, "continuous", 1, (8, 8), log_std_init=0.5, rng=np.random.default_rng(seed), dtype="float64")
+
+    def environments():
+        return [TimeLimit(make_env("Pendulum-v1"), max_episode_steps=30) for _ in range(N)]
+
+    theirs, mine = environments(), environments()
+    scaler = RewardScaler(0.99, enabled=False, num_envs=N)
+    rollout = Rollout(theirs, agent, ObservationNormalizer((3,)), scaler, T, np.random.default_rng(seed), seed)
+    normalizer, rng = ObservationNormalizer((3,)), np.random.default_rng(seed)
+    raw = np.stack([env.reset(seed=seed + i)[0] for i, env in enumerate(mine)]).astype(np.float64)
+    bounds = (mine[0].action_space.low, mine[0].action_space.high)
+    for _ in range(2):
+        batch = rollout.collect()
+        policy = SnapshotPolicy(agent, rng, T, N)
+        result = ch10_ppo_update.collect(policy, mine, normalizer, raw, T, bounds)
+        assert batch.truncated.any() and np.any(np.abs(batch.actions) > 2.0)
+        for name in ("obs", "actions", "logp", "values", "rewards", "terminated", "truncated"):
+            same(result[name], getattr(batch, name))
+        same(result["next_values"], np.where(batch.terminated, 0.0, batch.next_values))
+        same(result["raw_obs"], rollout.raw_obs)
+        same([normalizer.stats.mean, normalizer.stats.var], [rollout.obs_normalizer.stats.mean,
+             rollout.obs_normalizer.stats.var])  # fmt: skip
+        raw = result["raw_obs"]
 
 
 @pytest.mark.parametrize("seed", SEEDS)

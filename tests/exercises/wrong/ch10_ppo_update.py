@@ -404,3 +404,126 @@ FIRST_FAILURE.update(
         "update_always_clips": r"grad_norm_clipping = False.*is config\.grad_norm_clipping ignored",
     }
 )
+
+
+# the rollout: collect
+
+
+def _collect(policy, envs, obs_normalizer, raw_obs, horizon, action_bounds=None, *, at_truncation="final",
+             at_termination="zero", logp_of="sampled", update="end", last_value="next", both_truncated=False,
+             reset_when="ended", store="normalised", update_rows="acted", actions_kept="sampled", act_on="normalised",
+             last_raw="next"):  # fmt: skip
+    """collect with switches for its usual mistakes (each default is the contract's)."""
+    T, N = horizon, len(envs)
+    raw = [np.array(raw_obs, dtype=np.float64)]
+    obs, actions, sent_actions = [], [], []
+    rewards = np.zeros((T, N))
+    terminated = np.zeros((T, N), dtype=bool)
+    truncated = np.zeros((T, N), dtype=bool)
+    finals = {}  # (t, i) -> the raw observation the step that ended an episode returned
+    for t in range(T):
+        o = obs_normalizer(raw[t])
+        a = policy.sample(o if act_on == "normalised" else raw[t])
+        obs.append(o)
+        sent = a if action_bounds is None else np.clip(a, action_bounds[0], action_bounds[1])
+        actions.append(a if actions_kept == "sampled" else sent)
+        sent_actions.append(sent)
+        following = np.empty_like(raw[t])
+        for i, env in enumerate(envs):
+            observation, reward, term, trunc, _ = env.step(sent[i])
+            rewards[t, i] = reward
+            terminated[t, i] = term
+            truncated[t, i] = trunc if both_truncated else trunc and not term
+            if term or trunc:
+                finals[(t, i)] = np.asarray(observation, dtype=np.float64)
+            if term or (trunc and reset_when == "ended"):
+                observation, _ = env.reset()
+            following[i] = observation
+        raw.append(following)
+        if update == "every step":
+            obs_normalizer.update(raw[t])
+    if update == "before the bootstrap values":
+        obs_normalizer.update(np.array(raw[:T]).reshape(T * N, -1))
+    obs, actions = np.array(obs), np.array(actions)
+    flat = obs.reshape(T * N, -1)
+    chosen = actions if logp_of == "sampled" else np.array(sent_actions)
+    logp = policy.log_prob(flat, chosen.reshape(T * N, *actions.shape[2:])).reshape(T, N)
+    values = policy.value(flat).reshape(T, N)
+    next_values = np.empty((T, N))
+    next_values[:-1] = values[1:]
+    next_values[-1] = policy.value(obs_normalizer(raw[T])) if last_value == "next" else values[-1]
+    if last_value == "unshifted":
+        next_values = values.copy()
+    for (t, i), final in finals.items():
+        how = at_termination if terminated[t, i] else at_truncation
+        if how == "final":
+            next_values[t, i] = policy.value(obs_normalizer(final))
+        elif how == "zero":
+            next_values[t, i] = 0.0
+        # "reset": keep V of the next stored observation, the one env.reset() returned
+    if update == "end":
+        rows = {"acted": raw[:T], "next": raw[1:], "normalised": obs}[update_rows]
+        obs_normalizer.update(np.array(rows).reshape(T * N, -1))
+    return {
+        "obs": obs if store == "normalised" else np.array(raw[:T]),
+        "actions": actions,
+        "logp": logp,
+        "values": values,
+        "next_values": next_values,
+        "rewards": rewards,
+        "terminated": terminated,
+        "truncated": truncated,
+        "raw_obs": (raw[T] if last_raw == "next" else raw[T - 1]).copy(),
+    }
+
+
+def _variant(**switches):
+    def collect(policy, envs, obs_normalizer, raw_obs, horizon, action_bounds=None):
+        return _collect(policy, envs, obs_normalizer, raw_obs, horizon, action_bounds, **switches)
+
+    return collect
+
+
+ROLLOUT_MISTAKES = {
+    # (the switches, the words its first failure must hold)
+    "rollout_no_bootstrap_at_truncation": (dict(at_truncation="zero"), r"no bootstrap at a truncation"),
+    "rollout_bootstraps_at_termination": (dict(at_termination="final"), r"a bootstrap at a termination"),
+    "rollout_logp_of_the_clipped_action": (dict(logp_of="clipped"), r"log π_θold of the clipped action"),
+    "rollout_updates_statistics_every_step": (
+        dict(update="every step"),
+        r"after obs_normalizer\.update|update was called \d+ times",
+    ),
+    "rollout_updates_before_the_bootstrap_values": (
+        dict(update="before the bootstrap values"),
+        r"after obs_normalizer\.update: .*s_T, or a truncated episode's final observation",
+    ),
+    "rollout_last_next_value_off_by_one": (
+        dict(last_value="own"),
+        r"the value of the step's own observation \(off by one\)",
+    ),
+    "rollout_next_values_unshifted": (dict(last_value="unshifted"), r"off by one"),
+    "rollout_post_reset_value_at_truncation": (
+        dict(at_truncation="reset"),
+        r"V of the observation env\.reset\(\) returned",
+    ),
+    "rollout_post_reset_value_at_every_episode_end": (
+        dict(at_truncation="reset", at_termination="reset"),
+        r"V of the observation env\.reset\(\) returned \(the next episode's first\) where the episode terminated",
+    ),
+    "rollout_keeps_truncated_with_terminated": (dict(both_truncated=True), r"counts as terminated"),
+    "rollout_resets_only_on_termination": (
+        dict(reset_when="terminated"),
+        r"stepped again at step \d+ without env\.reset",
+    ),
+    "rollout_stores_raw_observations": (dict(store="raw"), r"the raw observation s_t; store o_t"),
+    "rollout_policy_acts_on_raw_observations": (dict(act_on="raw"), r"the raw observation s_t; the policy acts on o_t"),
+    "rollout_updates_with_the_next_observations": (dict(update_rows="next"), r"s_1 … s_T"),
+    "rollout_updates_with_normalised_observations": (dict(update_rows="normalised"), r"the normalised observations"),
+    "rollout_stores_clipped_actions": (dict(actions_kept="clipped"), r"the clipped action; store a_t"),
+    "rollout_returns_the_last_acted_observation": (
+        dict(last_raw="acted"),
+        r"s_\{T−1\}, the observation of the last step",
+    ),
+}
+VARIANTS.update({name: {"collect": _variant(**switches)} for name, (switches, _) in ROLLOUT_MISTAKES.items()})
+FIRST_FAILURE.update({name: words for name, (_, words) in ROLLOUT_MISTAKES.items()})
