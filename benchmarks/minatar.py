@@ -2,6 +2,8 @@
 
     python -m benchmarks.minatar --steps N       # every (algorithm, game, seed) not yet recorded, then the table
     python -m benchmarks.minatar --score         # only recompute benchmarks/results/minatar.csv from the records
+    python -m benchmarks.minatar --steps N --algorithms A2C --config lr=0.00025 --envs ... --runs-csv ... --runs ...
+                                                 # an ablation: one algorithm with a setting changed, its own record
 
 PPO runs ``minippo train --preset atari`` (the paper's Table 5), A2C ``--preset a2c``, on the same network. Both of
 the paper's scores, from each run's ``episodes.csv``: the mean return over all of training and over the last 100
@@ -25,21 +27,25 @@ ALGORITHMS = {"PPO": "atari", "A2C": "a2c"}  # name: preset
 RUN_FIELDS = ["algorithm", "env", "seed", "steps", "return_mean", "wall_s", "steps_per_s", "commit", "command"]
 
 
-def run_name(algorithm: str, env_id: str, seed: int) -> str:
-    return f"{algorithm.lower()}-{env_id.replace('/', '-')}-seed{seed}"
+def run_name(algorithm: str, env_id: str, seed: int, overrides=()) -> str:
+    changed = "".join(f"-{text}" for text in overrides)  # an ablation's settings, as minippo sweep names its runs
+    return f"{algorithm.lower()}-{env_id.replace('/', '-')}{changed}-seed{seed}"
 
 
-def sweep_runs(algorithms, envs, seeds, steps) -> list:
-    """Game by game (so that a partial table covers whole games), then seed, then algorithm."""
+def sweep_runs(algorithms, envs, seeds, steps, overrides=()) -> list:
+    """Game by game (so that a partial table covers whole games), then seed, then algorithm; ``overrides``: KEY=VALUE
+    texts, as ``minippo train --config`` takes them, applied over the preset of every run."""
     from minippo.ppo import Config
     from minippo.presets import PRESETS
     from minippo.sweep import Run
 
     runs = []
     for env_id, seed, algorithm in itertools.product(envs, seeds, algorithms):
-        config = Config(env_id=env_id, total_steps=steps, seed=seed, **PRESETS[ALGORITHMS[algorithm]]).validate()
+        preset = Config(env_id=env_id, total_steps=steps, seed=seed, **PRESETS[ALGORITHMS[algorithm]])
+        config = preset.with_overrides(overrides).validate()
         labels = {"algorithm": algorithm, "env": env_id, "seed": seed}
-        runs.append(Run(run_name(algorithm, env_id, seed), config, labels, ["--preset", ALGORITHMS[algorithm]]))
+        options = ["--preset", ALGORITHMS[algorithm]] + (["--config", *overrides] if overrides else [])
+        runs.append(Run(run_name(algorithm, env_id, seed, overrides), config, labels, options))
     return runs
 
 
@@ -88,6 +94,14 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--envs", nargs="+", default=GAMES, metavar="ENV")
     parser.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3])
+    parser.add_argument("--algorithms", nargs="+", choices=list(ALGORITHMS), default=list(ALGORITHMS))
+    parser.add_argument(
+        "--config",
+        nargs="+",
+        default=[],
+        metavar="KEY=VALUE",
+        help="settings over every run's preset (an ablation: give it its own --runs-csv and --runs)",
+    )
     parser.add_argument("--steps", type=int, help="environment steps per run (required unless --score)")
     parser.add_argument("--score", action="store_true", help="only rewrite minatar.csv from the recorded runs")
     parser.add_argument("--runs-csv", default=str(common.RESULTS / "minatar_runs.csv"))
@@ -99,12 +113,14 @@ def main(argv=None) -> int:
         common.fail("--steps is required, at least one PPO batch (8 × 128 = 1024 steps)")
     code = 0
     if not args.score:
-        runs = sweep_runs(list(ALGORITHMS), args.envs, args.seeds, args.steps)
+        runs = sweep_runs(args.algorithms, args.envs, args.seeds, args.steps, args.config)
         code = common.run_sweep(runs, args.runs, args.runs_csv, RUN_FIELDS, args)
         if code == 130 or args.list:  # interrupted, or only listed: the table waits
             return code
     for run_dir in sorted(Path(args.runs).glob("*-MinAtar-*")):
         write_episodes(run_dir)
+    if args.config or set(args.algorithms) != set(ALGORITHMS):  # an ablation: its runs, no PPO-against-A2C table
+        return code
     table = write_table(args.runs_csv, args.runs, args.table_csv, args.envs, args.seeds)
     for rule in ("all_training", "last_100"):
         won = sum(row[f"winner_{rule}"] == "PPO" for row in table)

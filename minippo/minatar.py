@@ -6,12 +6,22 @@ Sticky actions (the last action repeats with probability 0.1) and the difficulty
 
 ``minatar`` is an optional dependency (``pip install 'minippo[minatar]'``); the games are registered the first time
 minippo is asked for a ``MinAtar/`` id.
+
+MinAtar 1.0.15 registers Gymnasium ids of its own (``minatar.gym.register_envs``, also named as a Gymnasium plugin):
+``MinAtar/<Game>-v0`` with all six actions and ``MinAtar/<Game>-v1`` with the minimal set, the same ids as minippo's.
+minippo keeps its own class under the ``-v1`` ids, and takes them back if MinAtar's registration ran first, for what
+MinAtar's class does not do: ``reset(seed=...)`` seeds Gymnasium's generator as well as the game's, and starts the
+episode with no action left to repeat; ``get_state``/``set_state`` put the game in a checkpoint, so that a resumed
+run is the run it would have been; and the action set and the episode's time limit are written here rather than
+chosen by whichever registration ran last. Playing the minimal action set is minippo's choice (MinAtar's ``-v1``
+makes the same one, its ``-v0`` keeps all six actions).
 """
 
 from __future__ import annotations
 
 import importlib.util
 import json
+import warnings
 
 import gymnasium as gym
 import numpy as np
@@ -104,11 +114,26 @@ class MinAtarEnv(gym.Env):
         return image.repeat(CELL_PIXELS, axis=0).repeat(CELL_PIXELS, axis=1)
 
 
+def is_ours(spec) -> bool:
+    entry = spec.entry_point
+    return entry is MinAtarEnv or entry == f"{__name__}:MinAtarEnv"
+
+
 def register_games() -> None:
-    """Register ``MinAtar/<Game>-v1`` for the five games (once), or say how to install MinAtar."""
+    """Register ``MinAtar/<Game>-v1`` for the five games as ``MinAtarEnv``, or say how to install MinAtar. An id that
+    another class holds (MinAtar's own registration, see the module's docstring) is taken back, with a warning."""
     if importlib.util.find_spec("minatar") is None:
         raise MinippoError("the MinAtar games need the minatar package: pip install 'minippo[minatar]'")
     for name, game in GAMES.items():
         env_id = f"MinAtar/{name}-v1"
-        if env_id not in gym.registry:
-            gym.register(env_id, entry_point=MinAtarEnv, kwargs={"game": game}, max_episode_steps=MAX_EPISODE_STEPS)
+        spec = gym.registry.get(env_id)
+        if spec is not None and is_ours(spec):
+            continue
+        if spec is not None:
+            warnings.warn(
+                f"{env_id} was registered with {spec.entry_point}; minippo registers its own MinAtarEnv under it "
+                "(seeded resets, a game state saved in checkpoints)",
+                stacklevel=2,
+            )
+            del gym.registry[env_id]
+        gym.register(env_id, entry_point=MinAtarEnv, kwargs={"game": game}, max_episode_steps=MAX_EPISODE_STEPS)

@@ -36,9 +36,13 @@ CARTPOLE_PPO = dict(
 
 # The paper's Table 5 (Atari): N = 8 actors, T = 128, K = 3 epochs, minibatches of 32 × 8 = 256, step size 2.5e-4 × α
 # and ε = 0.1 × α with α falling linearly from 1 to 0, c1 = 1, c2 = 0.01, γ = 0.99, λ = 0.95; one network with a
-# policy and a value head (eq. 9). The network is MinAtar's (conv 16 3×3, dense 128) instead of the paper's Atari one
-# (Mnih et al. 2015's three convolutions on 84 × 84 frames). A 10 × 10 grid of booleans needs no observation
-# normalisation, and MinAtar's rewards are small counts (the paper clips Atari's to their sign), so neither is scaled.
+# policy and a value head (eq. 9). Advantage normalisation and value clipping are Config's defaults (OpenAI Baselines'
+# ppo2 does both; Table 5 does not list them). The network is MinAtar's (conv 16 3×3, dense 128), not the paper's:
+# the paper used Mnih et al. 2016's for all three algorithms (conv 16 8×8 stride 4, conv 32 4×4 stride 2, dense 256, on
+# 84 × 84 × 4 frames); Baselines' code uses the Nature DQN network instead (conv 32 8×8/4, conv 64 4×4/2, conv 64
+# 3×3/1, dense 512). A 10 × 10 grid of booleans needs no observation normalisation, and MinAtar's rewards are small
+# counts, so neither is scaled (Atari runs usually clip each reward to its sign, as the DQN preprocessing and
+# Baselines' Atari wrappers do; the PPO paper does not say).
 ATARI = dict(
     num_envs=8,
     horizon=128,
@@ -61,8 +65,9 @@ ATARI = dict(
 # A2C (Mnih et al. 2016, synchronous), the paper's Atari baseline, from minippo's pieces: the L^PG objective (eq. 2)
 # with one gradient step on each batch of N = 16 actors × T = 5 steps, n-step advantages (GAE with λ = 1 is the
 # bootstrapped n-step return minus V), c1 = 0.5, c2 = 0.01, step size 7e-4 falling to 0, gradient norm clipped at 0.5,
-# no advantage normalisation, no value clipping, on the same network and observations as ATARI. Where it differs
-# from A2C as usually run: Adam (ε = 1e-5) instead of RMSProp, since minippo has only Adam.
+# no advantage normalisation, no value clipping, on the same network and observations as ATARI. These are the defaults
+# of OpenAI Baselines' A2C (a2c.learn), with Adam (ε = 1e-5) in place of its RMSProp, since minippo has only Adam. They
+# are not the paper's: its A2C used settings "tuned to maximize performance" (section 6.4) that it does not list.
 A2C = dict(
     ATARI,
     objective="pg",

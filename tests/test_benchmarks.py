@@ -443,6 +443,17 @@ def test_minatar_sweep_runs_each_game_with_both_presets():
     assert runs[0].command("runs").endswith("--quiet --preset atari") and "Breakout-v1" in runs[0].name
 
 
+def test_minatar_ablation_changes_one_setting_over_the_preset_and_names_it():
+    from benchmarks import minatar
+
+    runs = minatar.sweep_runs(["A2C"], ["MinAtar/Breakout-v1"], [3], 20_480, ["lr=0.00025"])
+    (run,) = runs
+    assert run.config.lr == 2.5e-4 and (run.config.objective, run.config.horizon) == ("pg", 5)  # the rest is A2C's
+    assert run.name == "a2c-MinAtar-Breakout-v1-lr=0.00025-seed3"
+    assert run.command("runs").endswith("--quiet --preset a2c --config lr=0.00025")
+    assert minatar.sweep_runs(["A2C"], ["MinAtar/Breakout-v1"], [3], 20_480)[0].name == "a2c-MinAtar-Breakout-v1-seed3"
+
+
 def test_minatar_table_scores_both_ways_and_counts_wins(tmp_path):
     from benchmarks import minatar
 

@@ -116,6 +116,41 @@ def test_minatar_games_pass_gymnasiums_checker(game):
 
 
 @needs_minatar
+def test_minippo_takes_the_ids_back_from_minatars_own_registration():
+    # MinAtar 1.0.15 registers MinAtar/<Game>-v0 and -v1 itself, with its own class: under those ids minippo's runs
+    # must still get minippo's class (seeded resets, a game state in checkpoints), and say that it took them back
+    import warnings
+
+    import gymnasium as gym
+    from minatar.gym import register_envs
+
+    from minippo.envs import env_state, make_env
+    from minippo.minatar import GAMES, MinAtarEnv, register_games
+
+    ids = [f"MinAtar/{name}-{version}" for name in GAMES for version in ("v0", "v1")]
+    before = {env_id: gym.registry.get(env_id) for env_id in ids}
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # Gymnasium's own "Overriding environment" where minippo's ids were
+            register_envs()
+        assert gym.registry["MinAtar/Breakout-v1"].entry_point == "minatar.gym:BaseEnv"
+        with pytest.warns(UserWarning, match="minippo registers its own MinAtarEnv") as caught:
+            env = make_env("MinAtar/Breakout-v1")
+        assert len(caught) == len(GAMES)  # one warning per game taken back
+        assert isinstance(env.unwrapped, MinAtarEnv) and env_state(env) is not None
+        assert all(gym.registry[f"MinAtar/{name}-v1"].entry_point is MinAtarEnv for name in GAMES)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            register_games()  # once they are minippo's again, registering is quiet
+        env.close()
+    finally:
+        for env_id, spec in before.items():
+            gym.registry.pop(env_id, None)
+            if spec is not None:
+                gym.registry[env_id] = spec
+
+
+@needs_minatar
 def test_minatar_episodes_repeat_with_their_seed():
     from minippo.envs import make_env
 
