@@ -42,8 +42,8 @@ def parse(path):
 
 
 def test_the_toc_names_the_course():
-    # the "why" page, then PPO on one page, come before chapter 1
-    assert CHAPTERS[:4] == ["intro", "why-ppo", "ppo-on-one-page", "notation"]
+    # the "why" page, the basics of reinforcement learning, then PPO on one page, come before chapter 1
+    assert CHAPTERS[:5] == ["intro", "why-ppo", "rl-basics", "ppo-on-one-page", "notation"]
     assert {"pytorch-bridge", "glossary"} <= set(CHAPTERS)
     assert "references" in CHAPTERS
     assert len(NUMBERED) >= 12
