@@ -54,8 +54,8 @@ def leaks_in(html: str) -> list[str]:
 
 
 def test_the_detector_sees_a_leak_and_passes_rendered_math():
-    leaked = '<article><ul><li><p>+ \\beta\\log Z(x)$. In the model</p></li></ul></article>'
-    rendered = '<article><p>the margin <span class="math notranslate nohighlight">\\(\\beta\\log Z(x)\\)</span></p></article>'
+    leaked = "<article><ul><li><p>+ \\beta\\log Z(x)$. In the model</p></li></ul></article>"
+    rendered = '<article><p>a <span class="math notranslate nohighlight">\\(\\beta\\log Z(x)\\)</span></p></article>'
     code = '<article><div class="highlight"><pre>ax.set_ylabel(r"$\\beta$")</pre></div></article>'
     assert leaks_in(leaked) and not leaks_in(rendered) and not leaks_in(code)
     assert leaks_in("<article><p>where $R(x, y) = 1</p></article>")
