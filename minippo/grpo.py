@@ -11,6 +11,14 @@ Schulman's (2020) "k3" estimator of KL[π_θ ‖ π_ref], unbiased on tokens sam
 The objective is L^CLIP's clipped ratio with these advantages, minus β k3, averaged over each response's tokens and
 then over the responses (Shao et al.'s eq. 3). Everything else is minippo's: the language model, the categorical,
 Adam, and the collection of responses of minippo.rlhf.
+
+k3's value is unbiased, but its gradient in the loss is not the gradient of that KL: under a ~ π_θ,
+E[(1 − π_ref/π_θ) ∇log π_θ] = −Σ_a π_ref(a) ∇log π_θ(a) = ∇KL[π_ref ‖ π_θ], the forward KL, token by token (Tang &
+Munos 2025). So GRPO as published does not aim at the optimum π* ∝ π_ref exp(R/β) of chapter 13's objective. Three
+switches turn its departures from that objective off one by one, each a variant used in practice: ``normalize_std``
+(the division by the group's std), ``kl_in`` (the KL in the loss, or in the reward as PPO has it) and
+``average_over_tokens`` (the 1/|y| weight of each response's tokens). With all three off the update is the group-
+baseline policy gradient of chapter 13's objective.
 """
 
 from __future__ import annotations
@@ -42,17 +50,33 @@ class GRPOConfig:
     max_grad_norm: float = 0.5
     prompt_len: int = PROMPT_LEN
     response_len: int | None = None  # the longest response (None: up to MAX_LEN tokens in all)
+    # divide each group's centred scores by the group's std (Shao et al.); False: centre them only (Liu et al. 2025)
+    normalize_std: bool = True
+    # where the KL to π_ref goes: "loss", β k3 per token in the objective (Shao et al.), or "reward", β Σ_t log
+    # π_θold/π_ref subtracted from each response's score before the group advantages, as PPO does (chapter 13)
+    kl_in: str = "loss"
+    # weight each response's tokens 1/|y| (Shao et al.'s eq. 3); False: weight 1, the gradient of log π(y) = Σ_t log
+    # π(a_t|s_t) of the whole response (Liu et al. 2025); either way the responses are then averaged
+    average_over_tokens: bool = True
+
+    def __post_init__(self):
+        if self.kl_in not in ("loss", "reward"):
+            raise ValueError(f"kl_in must be 'loss' or 'reward', not {self.kl_in!r}")
 
 
-def group_advantages(scores: np.ndarray, eps: float = 1e-8) -> np.ndarray:
+def group_advantages(scores: np.ndarray, eps: float = 1e-8, normalize_std: bool = True) -> np.ndarray:
     """Â = (R − mean of its group) / (std of its group + eps), for scores (m, G), one row per prompt; the std is
-    the population one (ddof = 0). A group whose responses all score the same gets advantages of 0."""
+    the population one (ddof = 0). A group whose responses all score the same gets advantages of 0. With
+    ``normalize_std`` False, Â = R − mean of its group."""
     centred = scores - scores.mean(axis=1, keepdims=True)
+    if not normalize_std:
+        return centred
     return centred / (scores.std(axis=1, keepdims=True) + eps)
 
 
 def k3(logp: np.ndarray, logp_ref: np.ndarray) -> np.ndarray:
-    """k3 = π_ref/π − log(π_ref/π) − 1 per token: an estimate of KL[π ‖ π_ref] from a token sampled from π."""
+    """k3 = π_ref/π − log(π_ref/π) − 1 per token: an estimate of KL[π ‖ π_ref] from a token sampled from π (its
+    value; its gradient as a loss, 1 − π_ref/π per unit of log π, follows KL[π_ref ‖ π] instead)."""
     log_ratio = logp_ref - logp
     return np.exp(log_ratio) - log_ratio - 1.0
 
@@ -83,7 +107,7 @@ def grpo_step(policy, optimizer: Adam, minibatch: dict, config: GRPOConfig) -> f
         minibatch["advantages"],
         minibatch["weights"],
         config.clip_epsilon,
-        config.beta,
+        config.beta if config.kl_in == "loss" else 0.0,
     )
     (grad_logits,) = dist.log_prob_backward(minibatch["actions"], -grad_logp)  # minimise −J
     policy.backward(cache, grad_logits)
@@ -103,7 +127,12 @@ def train_grpo(pretrained: ActorCritic, reward_model: RewardModel, config: GRPOC
     for update in range(1, config.updates + 1):
         prompts = np.repeat(make_prompts(config.prompts, rng, config.prompt_len), config.group, axis=0)
         batch = collect(agent, reference, reward_model, prompts, 0.0, rng, config.response_len)
-        advantages = group_advantages(batch["scores"].reshape(config.prompts, config.group)).reshape(-1)
+        inside = np.arange(batch["logp"].shape[1])[None, :] < batch["lengths"][:, None]
+        returns = batch["scores"]
+        if config.kl_in == "reward":  # R − β Σ_t log π_θold/π_ref: a one-sample estimate of R − β KL per response
+            returns = returns - config.beta * np.where(inside, batch["logp"] - batch["logp_ref"], 0.0).sum(axis=1)
+        grouped = returns.reshape(config.prompts, config.group)
+        advantages = group_advantages(grouped, normalize_std=config.normalize_std).reshape(-1)
         n_responses = len(prompts)
         for _ in range(config.epochs):
             order = rng.permutation(n_responses)
@@ -113,19 +142,18 @@ def train_grpo(pretrained: ActorCritic, reward_model: RewardModel, config: GRPOC
                 valid = np.arange(batch["logp"].shape[1])[None, :] < lengths[:, None]
                 minibatch = {key: batch[key][take][valid] for key in ("obs", "actions", "logp", "logp_ref")}
                 minibatch["advantages"] = np.broadcast_to(advantages[take][:, None], valid.shape)[valid]
-                per_token = 1.0 / (len(take) * lengths)
+                per_token = 1.0 / (len(take) * (lengths if config.average_over_tokens else np.ones_like(lengths)))
                 minibatch["weights"] = np.broadcast_to(per_token[:, None], valid.shape)[valid]
                 grpo_step(policy, optimizer, minibatch, config)
-        valid = np.arange(batch["logp"].shape[1])[None, :] < batch["lengths"][:, None]
-        logp_after = Categorical(policy(batch["obs"][valid])).log_prob(batch["actions"][valid])
+        logp_after = Categorical(policy(batch["obs"][inside])).log_prob(batch["actions"][inside])
         stats = {
             "update": update,
             "score": float(np.mean(batch["scores"])),
             **sequence_stats(batch["tokens"], batch["text_lengths"]),
-            "kl_to_reference": float(np.mean(np.where(valid, batch["logp"] - batch["logp_ref"], 0.0).sum(axis=1))),
+            "kl_to_reference": float(np.mean(np.where(inside, batch["logp"] - batch["logp_ref"], 0.0).sum(axis=1))),
             "length": float(np.mean(batch["lengths"])),
-            "approx_kl": losses.approx_kl(logp_after, batch["logp"][valid]),
-            "clip_fraction": losses.clip_fraction(logp_after, batch["logp"][valid], config.clip_epsilon),
+            "approx_kl": losses.approx_kl(logp_after, batch["logp"][inside]),
+            "clip_fraction": losses.clip_fraction(logp_after, batch["logp"][inside], config.clip_epsilon),
         }
         history.append(stats)
         if on_update is not None:

@@ -1,5 +1,6 @@
-"""Chapter 14: GRPO and DPO beside PPO. Two pieces that are new in PPO's descendants: GRPO's advantages, measured
-within the group of responses to one prompt, and DPO's loss, the Bradley–Terry loss on the implicit reward
+"""Chapter 14: GRPO and DPO beside PPO. Three pieces that are new in PPO's descendants: GRPO's advantages, measured
+within the group of responses to one prompt; GRPO's objective, the clipped surrogate minus β k3 per token, with its
+gradient with respect to the token log-probabilities; and DPO's loss, the Bradley–Terry loss on the implicit reward
 β log π_θ(y|x)/π_ref(y|x), with its gradient with respect to the policy's sequence log-probabilities.
 
 Grade: ``minippo grade 14``
@@ -9,10 +10,10 @@ from __future__ import annotations
 
 import numpy as np
 
-EXERCISES = ["grpo_advantages", "dpo_loss"]
+EXERCISES = ["group_advantages", "grpo_objective", "dpo_loss"]
 
 
-def grpo_advantages(scores: np.ndarray, eps: float = 1e-8) -> np.ndarray:
+def group_advantages(scores: np.ndarray, eps: float = 1e-8) -> np.ndarray:
     """The group-relative advantage of every response: its score minus the mean of its group, divided by the
     standard deviation of its group (the population one, ddof = 0) plus ``eps``.
 
@@ -21,6 +22,28 @@ def grpo_advantages(scores: np.ndarray, eps: float = 1e-8) -> np.ndarray:
     scores = np.asarray(scores, dtype=np.float64)
     centred = scores - scores.mean(axis=1, keepdims=True)
     return centred / (scores.std(axis=1, keepdims=True) + eps)
+
+
+def grpo_objective(logp, logp_old, logp_ref, advantages, weights, epsilon: float, beta: float):
+    """GRPO's objective over a minibatch of tokens, to be maximised, and its gradient:
+
+        J = Σ_t w_t [min(r_t Â_t, clip(r_t, 1 − ε, 1 + ε) Â_t) − β k3_t],
+        r_t = π_θ(a_t|s_t) / π_θold(a_t|s_t),   k3_t = π_ref/π_θ − log(π_ref/π_θ) − 1   (of token t).
+
+    logp, logp_old, logp_ref: (n,) log π_θ, log π_θold and log π_ref of the n tokens' actions; advantages: (n,) Â_t;
+    weights: (n,) w_t (1 / (responses × its response's length) in GRPO). Returns (J as a float, ∂J/∂ log π_θ (n,)),
+    the gradient taken with logp_old, logp_ref, the advantages and the weights held fixed. Where the two terms of the
+    min are equal, take the unclipped one's derivative.
+    """
+    ratio = np.exp(logp - logp_old)
+    unclipped = ratio * advantages
+    clipped = np.clip(ratio, 1.0 - epsilon, 1.0 + epsilon) * advantages
+    ref_over_policy = np.exp(logp_ref - logp)  # π_ref/π_θ
+    k3 = ref_over_policy - (logp_ref - logp) - 1.0
+    value = float(np.sum(weights * (np.minimum(unclipped, clipped) - beta * k3)))
+    # d(r Â)/d log π = r Â where the unclipped term is the smaller (the clipped one is flat); dk3/d log π = 1 − π_ref/π
+    grad = weights * (np.where(unclipped <= clipped, unclipped, 0.0) - beta * (1.0 - ref_over_policy))
+    return value, grad
 
 
 def dpo_loss(logp_preferred, logp_rejected, ref_preferred, ref_rejected, beta: float):

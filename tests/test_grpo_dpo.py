@@ -38,6 +38,51 @@ def test_k3_is_an_unbiased_never_negative_estimate_of_the_kl(rng):
     assert np.isclose(p @ estimates, p @ np.log(p / q))  # its expectation under π is KL[π ‖ π_ref], exactly
 
 
+def test_group_advantages_without_the_std_division_are_centred_scores():
+    scores = np.array([[1.0, 2.0, 3.0, 6.0], [0.0, 0.0, 4.0, 4.0]])
+    assert_close(group_advantages(scores, normalize_std=False), scores - scores.mean(axis=1, keepdims=True))
+
+
+def test_k3_in_the_loss_follows_the_forward_kl_and_k1_in_the_reward_the_reverse_kl(rng):
+    """Exact expectations over a categorical π = softmax(z): the gradient of β k3 taken through log π with the sample
+    held (what grpo_objective returns, per token) averages to ∇KL[π_ref ‖ π]; the log-ratio used as a reward, to
+    ∇KL[π ‖ π_ref]. Both KLs' gradients are checked by central finite differences."""
+    z, logits_ref = rng.normal(size=5), rng.normal(size=5)
+    log_ref = logits_ref - np.logaddexp.reduce(logits_ref)
+
+    def log_pi():
+        return z - np.logaddexp.reduce(z)
+
+    grad_log_pi = np.eye(5) - np.exp(log_pi())  # row a: ∇_z log π(a)
+    forward = numerical_gradient(lambda: float(np.exp(log_ref) @ (log_ref - log_pi())), z)
+    reverse = numerical_gradient(lambda: float(np.exp(log_pi()) @ (log_pi() - log_ref)), z)
+    # grpo_objective's gradient with Â = 0, β = 1 and weight 1 is −∂k3/∂log π, token by token
+    _, grad = grpo_objective(log_pi(), log_pi(), log_ref, np.zeros(5), np.ones(5), 0.2, 1.0)
+    in_the_loss = np.exp(log_pi()) @ (-grad[:, None] * grad_log_pi)
+    in_the_reward = np.exp(log_pi()) @ ((log_pi() - log_ref)[:, None] * grad_log_pi)
+    assert_close(in_the_loss, forward)
+    assert_close(in_the_reward, reverse)
+    assert np.abs(in_the_loss - reverse).max() > 1e-2  # the two KLs' gradients differ here
+
+
+@pytest.mark.parametrize(
+    "fields",
+    [dict(normalize_std=False), dict(kl_in="reward"), dict(average_over_tokens=False)],
+    ids=["normalize_std", "kl_in", "average_over_tokens"],
+)
+def test_each_grpo_switch_changes_the_update(small_pieces, fields):
+    model, reward_model, _ = small_pieces
+    config = dict(updates=2, prompts=2, group=4, beta=0.5)  # responses of different lengths
+    published = train_grpo(model, reward_model, GRPOConfig(**config))[0]
+    switched = train_grpo(model, reward_model, GRPOConfig(**config, **fields))[0]
+    assert not np.allclose(published.params, switched.params)
+
+
+def test_an_unknown_kl_place_is_an_error():
+    with pytest.raises(ValueError, match="kl_in"):
+        GRPOConfig(kl_in="advantage")
+
+
 def test_grpo_objective_gradient_matches_finite_differences(rng):
     n = 12
     logp_old = np.log(rng.uniform(0.05, 0.9, n))

@@ -1,6 +1,8 @@
 """Grading chapter 14: GRPO's group-relative advantages (by hand, within each group and not over the batch, a group
-of equal scores, the population standard deviation) and the DPO loss (against the likelihood written out, finite
-differences, β in both the value and the gradient, the reference's log-probabilities, huge margins)."""
+of equal scores, the population standard deviation), GRPO's objective (by hand, k3 and its gradient, which follows
+1 − π_ref/π_θ and not the reverse ratio, the clip's two sides, the weights, finite differences) and the DPO loss
+(against the likelihood written out, finite differences, β in both the value and the gradient, the reference's
+log-probabilities, huge margins)."""
 
 import _harness
 import numpy as np
@@ -14,16 +16,16 @@ rng = _harness.rng  # a seeded NumPy Generator
 pytestmark = pytest.mark.timeout(10)
 
 
-def test_grpo_advantages_by_hand(student):
+def test_group_advantages_by_hand(student):
     scores = np.array([[1.0, 2.0, 3.0, 6.0], [0.0, 4.0, 4.0, 0.0]])
-    advantages = call_checking_inputs(student.grpo_advantages, "grpo_advantages", scores)
-    check_array(advantages, "grpo_advantages", (2, 4))
+    advantages = call_checking_inputs(student.group_advantages, "group_advantages", scores)
+    check_array(advantages, "group_advantages", (2, 4))
     # group 1: mean 3, population std √3.5; group 2: mean 2, std 2
     expected = np.array([np.array([-2.0, -1.0, 0.0, 3.0]) / np.sqrt(3.5), [-1.0, 1.0, 1.0, -1.0]])
     check_close(
         advantages,
         expected,
-        "grpo_advantages",
+        "group_advantages",
         "the advantages (score − its group's mean) / (its group's std + eps), the std with ddof = 0",
         1e-6,
         1e-7,
@@ -31,14 +33,14 @@ def test_grpo_advantages_by_hand(student):
     )
 
 
-def test_grpo_advantages_are_measured_within_each_group(student, rng):
+def test_group_advantages_are_measured_within_each_group(student, rng):
     """Two groups on very different scales: each must come out with mean 0 and std 1 on its own."""
     scores = np.stack([rng.normal(10.0, 1.0, 6), rng.normal(-50.0, 20.0, 6), rng.normal(0.0, 0.1, 6)])
-    advantages = check_array(student.grpo_advantages(scores), "grpo_advantages", (3, 6))
+    advantages = check_array(student.group_advantages(scores), "group_advantages", (3, 6))
     check_close(
         advantages.mean(axis=1),
         np.zeros(3),
-        "grpo_advantages",
+        "group_advantages",
         "the mean advantage of each group (row): measure against the group's own mean, not the batch's",
         1e-6,
         1e-7,
@@ -46,28 +48,132 @@ def test_grpo_advantages_are_measured_within_each_group(student, rng):
     check_close(
         advantages.std(axis=1),
         np.ones(3),
-        "grpo_advantages",
+        "group_advantages",
         "the standard deviation of each group's advantages: divide by the group's own std, not the batch's",
         1e-5,
         1e-7,
     )
 
 
-def test_grpo_advantages_of_a_group_that_all_scored_the_same_are_zero(student):
+def test_group_advantages_of_a_group_that_all_scored_the_same_are_zero(student):
     scores = np.array([[2.5, 2.5, 2.5], [1.0, 2.0, 3.0]])
-    advantages = check_array(student.grpo_advantages(scores), "grpo_advantages", (2, 3))
+    advantages = check_array(student.group_advantages(scores), "group_advantages", (2, 3))
     check_close(
         advantages[0],
         np.zeros(3),
-        "grpo_advantages",
+        "group_advantages",
         "the advantages of a group whose responses all scored 2.5 (its std is 0: add eps to it)",
     )
 
 
-def test_grpo_advantages_of_one_group_with_eps(student):
+def test_group_advantages_of_one_group_with_eps(student):
     scores = np.array([[0.0, 1.0]])
-    advantages = check_array(student.grpo_advantages(scores, eps=0.5), "grpo_advantages", (1, 2))
-    check_close(advantages, [[-0.5, 0.5]], "grpo_advantages", "the advantages of scores [0, 1] with eps = 0.5")
+    advantages = check_array(student.group_advantages(scores, eps=0.5), "group_advantages", (1, 2))
+    check_close(advantages, [[-0.5, 0.5]], "group_advantages", "the advantages of scores [0, 1] with eps = 0.5")
+
+
+def reference_grpo(logp, logp_old, logp_ref, advantages, weights, epsilon, beta):
+    """J written token by token, with the clip and the min as cases."""
+    total = 0.0
+    for lp, old, ref, a, w in zip(logp, logp_old, logp_ref, advantages, weights):
+        r = np.exp(lp - old)
+        surrogate = min(r * a, min(max(r, 1 - epsilon), 1 + epsilon) * a)
+        u = np.exp(ref - lp)  # π_ref/π_θ
+        total += w * (surrogate - beta * (u - np.log(u) - 1))
+    return float(total)
+
+
+def test_grpo_objective_by_hand(student):
+    """Three tokens with Â = 0 (the KL term alone), then the clip on each side."""
+    log2 = np.log(2.0)
+    # token 0: π_ref/π_θ = 2, k3 = 2 − log 2 − 1; token 1: π_ref/π_θ = ½, k3 = ½ + log 2 − 1; token 2: k3 = 0
+    logp, logp_ref = np.array([-log2, -1.0, -0.5]), np.array([0.0, -1.0 - log2, -0.5])
+    value, grad = call_checking_inputs(
+        student.grpo_objective, "grpo_objective", logp, logp.copy(), logp_ref, np.zeros(3), np.full(3, 0.5), 0.2, 0.4
+    )
+    check_scalar(value, "grpo_objective", "J")
+    check_array(grad, "grpo_objective", (3,), "∂J/∂ log π_θ")
+    check_close(value, -0.5 * 0.4 * ((1 - log2) + (log2 - 0.5)), "grpo_objective",
+                "J with Â = 0: −Σ w β k3, k3 = π_ref/π_θ − log(π_ref/π_θ) − 1 (β = 0.4, w = ½)")  # fmt: skip
+    check_close(
+        grad,
+        [-0.5 * 0.4 * (1 - 2.0), -0.5 * 0.4 * (1 - 0.5), 0.0],
+        "grpo_objective",
+        "∂J/∂ log π_θ with Â = 0: −w β (1 − π_ref/π_θ), the derivative of k3 with respect to log π_θ "
+        "(π_θ/π_ref − 1 or log(π_θ/π_ref) is the gradient of another KL)",
+        where={"π_ref/π_θ": [2.0, 0.5, 1.0]},
+    )
+    # r = 1.5 and 0.5 with ε = 0.2: Â > 0 above the range and Â < 0 below it are clipped (no gradient), the others not
+    ratios = np.array([1.5, 1.5, 0.5, 0.5])
+    advantages = np.array([1.0, -1.0, 1.0, -1.0])
+    logp_old = np.zeros(4)
+    value, grad = student.grpo_objective(np.log(ratios), logp_old, np.log(ratios), advantages, np.ones(4), 0.2, 0.0)
+    check_close(
+        check_scalar(value, "grpo_objective", "J"),
+        1.2 - 1.5 + 0.5 - 0.8,
+        "grpo_objective",
+        "J with β = 0, r = (1.5, 1.5, 0.5, 0.5), Â = (1, −1, 1, −1), ε = 0.2: Σ min(r Â, clip(r) Â)",
+    )
+    check_close(
+        check_array(grad, "grpo_objective", (4,), "∂J/∂ log π_θ"),
+        [0.0, -1.5, 0.5, 0.0],
+        "grpo_objective",
+        "∂J/∂ log π_θ with β = 0: r Â where the unclipped term is the smaller, 0 where the clipped one is "
+        "(the derivative with respect to log π_θ, not to r)",
+        where={"r": ratios, "Â": advantages},
+    )
+
+
+@pytest.fixture
+def tokens(rng):
+    n = 40
+    logp_old = np.log(rng.uniform(0.05, 0.9, n))
+    logp = logp_old + rng.choice([-1.0, 1.0], n) * rng.uniform(0.05, 0.6, n)  # some ratios outside [0.8, 1.2]
+    logp_ref = np.log(rng.uniform(0.05, 0.9, n))
+    return logp, logp_old, logp_ref, rng.normal(size=n), rng.uniform(0.01, 0.2, n)
+
+
+def test_grpo_objective_value(student, tokens):
+    value, _ = call_checking_inputs(student.grpo_objective, "grpo_objective", *tokens, 0.2, 0.3)
+    check_close(
+        check_scalar(value, "grpo_objective", "J"),
+        reference_grpo(*tokens, 0.2, 0.3),
+        "grpo_objective",
+        "J = Σ w_t [min(r_t Â_t, clip(r_t, 1 − ε, 1 + ε) Â_t) − β k3_t], ε = 0.2, β = 0.3, on 40 tokens",
+    )
+
+
+def test_grpo_objective_weighs_each_token(student, tokens):
+    logp, logp_old, logp_ref, advantages, _ = tokens
+    weights = np.zeros(len(logp))
+    weights[::3] = 1.0 / 7
+    value, grad = student.grpo_objective(logp, logp_old, logp_ref, advantages, weights, 0.2, 0.3)
+    check_close(
+        check_scalar(value, "grpo_objective", "J"),
+        reference_grpo(*tokens[:4], weights, 0.2, 0.3),
+        "grpo_objective",
+        "J when only every third token has a weight (1/7): both terms are weighted",
+    )
+    check_close(
+        check_array(grad, "grpo_objective", (len(logp),), "∂J/∂ log π_θ")[weights == 0],
+        np.zeros(int(np.sum(weights == 0))),
+        "grpo_objective",
+        "∂J/∂ log π_θ of the tokens whose weight is 0 (the KL term is weighted too)",
+    )
+
+
+def test_grpo_objective_gradient_matches_finite_differences(student, tokens):
+    logp, logp_old, logp_ref, advantages, weights = tokens
+    _, grad = student.grpo_objective(logp, logp_old, logp_ref, advantages, weights, 0.2, 0.3)
+    check_close(
+        check_array(grad, "grpo_objective", (len(logp),), "∂J/∂ log π_θ"),
+        numerical_gradient(lambda: reference_grpo(logp, logp_old, logp_ref, advantages, weights, 0.2, 0.3), logp),
+        "grpo_objective",
+        "∂J/∂ log π_θ, ε = 0.2, β = 0.3 (checked by finite differences)",
+        1e-5,
+        1e-7,
+        where={"r": np.exp(logp - logp_old), "Â": advantages, "π_ref/π_θ": np.exp(logp_ref - logp)},
+    )
 
 
 def reference_dpo(logp_w, logp_l, ref_w, ref_l, beta):

@@ -16,7 +16,7 @@ from minippo.conv import conv2d_backward, conv2d_forward
 from minippo.distributions import Categorical, DiagGaussian
 from minippo.dpo import dpo_loss
 from minippo.envs import make_env
-from minippo.grpo import group_advantages
+from minippo.grpo import group_advantages, grpo_objective
 from minippo.network import MLP, linear_backward, tanh_backward
 from minippo.normalization import ObservationNormalizer, RewardScaler
 from minippo.optimizer import Adam
@@ -288,6 +288,10 @@ def test_grpo_and_dpo(seed):
     rng = np.random.default_rng(seed)
     scores = rng.normal(size=(5, 6))
     scores[0] = 1.5  # a group that all scored the same
-    same(ch14_grpo_dpo.grpo_advantages(scores), group_advantages(scores))
+    same(ch14_grpo_dpo.group_advantages(scores), group_advantages(scores))
+    logp_old = rng.normal(-1.5, 0.5, 20)
+    tokens = logp_old + rng.normal(0, 0.3, 20), logp_old, rng.normal(-1.5, 0.5, 20), rng.normal(size=20)
+    weights = rng.uniform(0.01, 0.2, 20)
+    same(ch14_grpo_dpo.grpo_objective(*tokens, weights, 0.2, 0.3), grpo_objective(*tokens, weights, 0.2, 0.3))
     logps = [rng.normal(-6.0, 2.0, 8) for _ in range(4)]
     same(ch14_grpo_dpo.dpo_loss(*logps, 0.4), dpo_loss(*logps, 0.4))
