@@ -3,6 +3,7 @@ of each claim on it (held, failed, or not reached after an error), and the exit 
 
 import csv
 import importlib.util
+import json
 import sys
 from pathlib import Path
 
@@ -84,3 +85,19 @@ def test_bad_seeds_are_one_line_errors(capsys):
         check_claims.main(["--seeds", "zero", "--out", "/dev/null"])
     assert stop.value.code == 2
     assert "--seeds takes integers" in capsys.readouterr().err
+
+
+@pytest.mark.timeout(180)
+def test_update_replaces_only_the_draws_it_runs(tmp_path):
+    book = tmp_path / "book"
+    book.mkdir()
+    (book / "page.md").write_text(PAGE)
+    out = tmp_path / "claims.csv"
+    assert check_claims.main(["--book", str(book), "--seeds", "0", "--jobs", "1", "--out", str(out)]) == 0
+    (book / "page.md").write_text(PAGE.replace("draw < 1", "draw < 5"))  # the page changed: draw 1 now holds
+    assert check_claims.main(["--book", str(book), "--seeds", "1", "--jobs", "1", "--out", str(out), "--update"]) == 1
+    with open(out, newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert sorted({row["seed"] for row in rows}) == ["0", "1"]
+    assert {row["claim"] for row in rows if row["seed"] == "1" and row["line"] == "15"} == {"assert draw < 5"}
+    assert len(json.loads(out.with_suffix(".json").read_text())["runs"]) == 2

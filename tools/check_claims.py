@@ -13,7 +13,8 @@ execution (``book/_ext/execute_ahead.py``), several at a time, each in a kernel 
 
 The record (``--out``, default ``benchmarks/results/book_claims.csv``) has one row per claim and draw: the page, the
 claim's line in the page's source, its text, the seed, the environment, and ``held``, ``failed`` or ``not reached`` (a
-cell before it stopped with an error), with the command and commit that made it in ``book_claims.json`` beside it.
+cell before it stopped with an error), with the command and commit of each run that made it in ``book_claims.json``
+beside it. ``--update`` replaces only the rows of the pages and draws it runs (a page changed since, another kernel).
 The closing table prints claims × seeds, failures first. The exit status is 1 when any claim failed or any page
 stopped with an error, 0 when every claim held on every draw.
 """
@@ -195,6 +196,9 @@ def main(argv=None) -> int:
     parser.add_argument("--timeout", type=int, default=900, help="seconds a cell may take")
     parser.add_argument("--out", type=Path, default=RECORD, help="the CSV record (default %(default)s)")
     parser.add_argument("--book", type=Path, default=BOOK, help="the book's folder (default %(default)s)")
+    parser.add_argument(
+        "--update", action="store_true", help="replace only these pages' and draws' rows of --out, keep the others"
+    )
     args = parser.parse_args(argv)
     try:
         seeds = seeds_from(args.seeds)
@@ -231,21 +235,36 @@ def main(argv=None) -> int:
                 flush=True,
             )
     results.sort(key=lambda r: (r["page"], r["seed"]))
+    header = ["page", "line", "claim", "seed", "env", "verdict"]
+    rows = [
+        [result["page"], claim["line"], claim["text"], result["seed"], label, claim["verdict"]]
+        for result in results
+        for claim in result["claims"]
+    ]
+    runs = []
+    if args.update and args.out.exists():  # keep the other pages' and draws' rows, and the runs that made them
+        ran = {(r["page"], str(r["seed"]), label) for r in results}
+        with open(args.out, newline="", encoding="utf-8") as handle:
+            kept = [row for row in csv.reader(handle)][1:]
+        rows = [row for row in kept if (row[0], row[3], row[4]) not in ran] + rows
+        about_path = args.out.with_suffix(".json")
+        if about_path.exists():
+            runs = json.loads(about_path.read_text(encoding="utf-8")).get("runs", [])
+    rows.sort(key=lambda row: (row[4], row[0], int(row[3]), int(row[1])))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     with open(args.out, "w", newline="", encoding="utf-8") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(["page", "line", "claim", "seed", "env", "verdict"])
-        for result in results:
-            for claim in result["claims"]:
-                writer.writerow([result["page"], claim["line"], claim["text"], result["seed"], label, claim["verdict"]])
-    about = {
-        "command": "python tools/check_claims.py " + " ".join(argv if argv is not None else sys.argv[1:]),
-        "commit": commit(),
-        "date": time.strftime("%Y-%m-%d"),
-        "machine": platform.processor() or platform.machine(),
-        "pages": {r["page"]: r["errors"] for r in results if r["errors"]},
-    }
-    args.out.with_suffix(".json").write_text(json.dumps(about, indent=1) + "\n", encoding="utf-8")
+        csv.writer(handle).writerows([header, *rows])
+    runs.append(
+        {
+            "command": "python tools/check_claims.py " + " ".join(argv if argv is not None else sys.argv[1:]),
+            "commit": commit(),
+            "date": time.strftime("%Y-%m-%d"),
+            "machine": platform.processor() or platform.machine(),
+            "pages": sorted({r["page"] for r in results}),
+            "errors": {f"{r['page']} {r['seed']}": r["errors"] for r in results if r["errors"]},
+        }
+    )
+    args.out.with_suffix(".json").write_text(json.dumps({"runs": runs}, indent=1) + "\n", encoding="utf-8")
     columns = [column(s) for s in seeds]
     print(table(results, columns))
     bad = any(c["verdict"] != "held" for r in results for c in r["claims"]) or any(r["errors"] for r in results)
