@@ -95,12 +95,13 @@ def diagnostics(log_ratio, clip_epsilon):
     return ((ratio - 1) - log_ratio).mean().item(), ((ratio - 1).abs() > clip_epsilon).float().mean().item()
 
 
-def gae(rewards, values, next_values, terminated, truncated, gamma, lam):
+def gae(buffer, gamma, lam):
     """Â_t = δ_t + γλ Â_{t+1} (eq. 11), δ_t = r_t + γ V(s_{t+1}) − V(s_t), with no V(s_{t+1}) after a termination."""
-    deltas = rewards + gamma * next_values * (1 - terminated) - values
-    advantages = torch.zeros_like(rewards)
-    following = torch.zeros_like(rewards[0])
-    for t in reversed(range(len(rewards))):
+    terminated, truncated = buffer["terminated"], buffer["truncated"]
+    deltas = buffer["rewards"] + gamma * buffer["next_values"] * (1 - terminated) - buffer["values"]
+    advantages = torch.zeros_like(deltas)
+    following = torch.zeros_like(deltas[0])
+    for t in reversed(range(len(deltas))):
         # an episode that ended at t (either way) passes nothing back to step t from the next one
         following = advantages[t] = deltas[t] + gamma * lam * (1 - terminated[t]) * (1 - truncated[t]) * following
     return advantages
@@ -142,15 +143,7 @@ def train(args: Args):
             inside = 1 - buffer["terminated"] - buffer["truncated"]
             following = torch.cat([buffer["values"][1:], agent.value(torch.as_tensor(obs, dtype=torch.float32))[None]])
             buffer["next_values"] = inside * following + buffer["truncated"] * buffer["next_values"]
-            advantages = gae(
-                buffer["rewards"],
-                buffer["values"],
-                buffer["next_values"],
-                buffer["terminated"],
-                buffer["truncated"],
-                args.gamma,
-                args.gae_lambda,
-            )
+            advantages = gae(buffer, args.gamma, args.gae_lambda)
             batch = {key: buffer[key].flatten(0, 1) for key in ("obs", "actions", "logp")}
             batch["advantages"] = advantages.flatten()
             batch["returns"] = (advantages + buffer["values"]).flatten()  # V^targ_t = Â_t + V(s_t)
