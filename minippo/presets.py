@@ -35,15 +35,15 @@ CARTPOLE_PPO = dict(
 )
 
 # The paper's Table 5 (Atari): N = 8 actors, T = 128, K = 3 epochs, minibatches of 32 × 8 = 256, step size 2.5e-4 × α
-# and ε = 0.1 × α with α falling linearly from 1 to 0, c1 = 1, c2 = 0.01, γ = 0.99, λ = 0.95; one network with a
-# policy and a value head (eq. 9). minippo's value loss carries its own ½, so value_coef = 1.0 is c1 = 0.5 in the
-# paper's form (its c1 = 1 would be value_coef = 2.0); the MinAtar records were made with 1.0. Advantage
-# normalisation and value clipping are Config's defaults (OpenAI Baselines' ppo2 does both; Table 5 does not list them). The network is MinAtar's (conv 16 3×3, dense 128), not the paper's:
-# the paper used Mnih et al. 2016's for all three algorithms (conv 16 8×8 stride 4, conv 32 4×4 stride 2, dense 256, on
-# 84 × 84 × 4 frames); Baselines' code uses the Nature DQN network instead (conv 32 8×8/4, conv 64 4×4/2, conv 64
-# 3×3/1, dense 512). A 10 × 10 grid of booleans needs no observation normalisation, and MinAtar's rewards are small
-# counts, so neither is scaled (Atari runs usually clip each reward to its sign, as the DQN preprocessing and
-# Baselines' Atari wrappers do; the PPO paper does not say).
+# and ε = 0.1 × α with α falling linearly from 1 to 0, c1 = 1, c2 = 0.01, γ = 0.99, λ = 0.95; one network with a policy
+# and a value head (eq. 9). minippo's value loss carries its own ½, so value_coef = 1.0 is c1 = 0.5 in the paper's form
+# (its c1 = 1 would be value_coef = 2.0); the MinAtar records were made with 1.0. Advantage normalisation and value
+# clipping are Config's defaults (OpenAI Baselines' ppo2 does both; Table 5 does not list them). The network is
+# MinAtar's (conv 16 3×3, dense 128), not the paper's: the paper used Mnih et al. 2016's for all three algorithms (conv
+# 16 8×8 stride 4, conv 32 4×4 stride 2, dense 256, on 84 × 84 × 4 frames); Baselines' code uses the Nature DQN network
+# instead (conv 32 8×8/4, conv 64 4×4/2, conv 64 3×3/1, dense 512). A 10 × 10 grid of booleans needs no observation
+# normalisation, and MinAtar's rewards are small counts, so neither is scaled (Atari runs usually clip each reward to
+# its sign, as the DQN preprocessing and Baselines' Atari wrappers do; the PPO paper does not say).
 ATARI = dict(
     num_envs=8,
     horizon=128,
