@@ -47,8 +47,8 @@ def executable_pages(book: Path = BOOK) -> list[Path]:
 
 class _Recorder(ast.NodeTransformer):
     """Turns each ``assert test, message`` of a page into ``__book_claim__(lambda: test, key)``: the condition is
-    still evaluated where the assert stood (so an error in it is still an error), but a false one is recorded instead
-    of raised. ``claims`` lists them in the order of the source: ``key`` (page:line), ``line`` (the line in the page's
+    still evaluated where the assert stood, but a false one is recorded instead of raised, and so is a condition that
+    raises (its verdict names the exception). ``claims`` lists them in the order of the source: ``key`` (page:line), ``line`` (the line in the page's
     Markdown source) and ``text``."""
 
     def __init__(self, page: Path):
@@ -71,7 +71,8 @@ class _Recorder(ast.NodeTransformer):
         line = next(found, 0)
         self.searched_from = max(self.searched_from, line)
         key = f"{self.page}:{line}"
-        while key in {claim["key"] for claim in self.claims}:
+        taken = {claim["key"] for claim in self.claims}
+        while key in taken:
             key += "'"
         text = " ".join(ast.get_source_segment(self.source, node).split())
         self.claims.append({"key": key, "line": line, "text": text})
