@@ -48,8 +48,8 @@ def executable_pages(book: Path = BOOK) -> list[Path]:
 class _Recorder(ast.NodeTransformer):
     """Turns each ``assert test, message`` of a page into ``__book_claim__(lambda: test, key)``: the condition is
     still evaluated where the assert stood, but a false one is recorded instead of raised, and so is a condition that
-    raises (its verdict names the exception). ``claims`` lists them in the order of the source: ``key`` (page:line), ``line`` (the line in the page's
-    Markdown source) and ``text``."""
+    raises (its verdict names the exception). ``claims`` lists them in the order of the source: ``key``
+    (page:line), ``line`` (the line in the page's Markdown source) and ``text``."""
 
     def __init__(self, page: Path):
         self.page, self.lines = page.stem, page.read_text(encoding="utf-8").splitlines()
