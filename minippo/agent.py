@@ -90,6 +90,15 @@ class ActorCritic:
                 self.nets[name].init(rng, gain, SQRT2, orthogonal_init)
             self.log_std[...] = log_std_init
 
+    def copy(self) -> ActorCritic:
+        """A twin with its own parameters, equal to these (π_ref and the policy fine-tuned from it start so)."""
+        twin = ActorCritic(
+            self.obs_dim, self.kind, self.act_dim, self.hidden_sizes, shared=self.shared, dtype=self.dtype,
+            network=self.network, image_shape=self.image_shape,
+        )  # fmt: skip
+        twin.params[...] = self.params
+        return twin
+
     # forward and backward over a batch of (normalised) observations
 
     def forward(self, obs: np.ndarray):
