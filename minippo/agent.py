@@ -9,12 +9,12 @@ import zipfile
 
 import numpy as np
 
-from minippo.checkpoint import write_atomically
 from minippo.conv import ConvTrunk
 from minippo.distributions import Categorical, DiagGaussian
 from minippo.errors import MinippoError
 from minippo.network import MLP
 from minippo.normalization import ObservationNormalizer
+from minippo.records import write_atomically
 
 SQRT2 = float(np.sqrt(2.0))
 NETWORKS = ("mlp", "minatar_cnn")

@@ -4,14 +4,15 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import json
 import signal
 import sys
 import threading
 from pathlib import Path
 
+from minippo.config import Config, field_types
 from minippo.errors import ConfigError, MinippoError, NonFiniteError
-from minippo.ppo import OBJECTIVES, Config
 from minippo.presets import PRESETS
 
 PRESET_NAMES = tuple(PRESETS)
@@ -56,34 +57,59 @@ def steps_notice(config) -> str | None:
     )
 
 
-FLAGS = {"env_id": "ENV", "total_steps": "--steps", "seed": "--seed", "objective": "--objective"}
+FLAGS = {"env_id": "ENV", "total_steps": "--steps"}  # the fields whose option is not --field-name
+METAVARS = {int: "N", float: "X", str: "WORD", bool: None}
+
+
+def flag(name: str) -> str:
+    """The option that sets the Config field ``name``: --clip-epsilon for clip_epsilon."""
+    return FLAGS.get(name, "--" + name.replace("_", "-"))
+
+
+def add_config_options(parser, skip=("env_id", "total_steps")) -> None:
+    """An option for every Config field (but ``skip``), made from the field's type, default and meaning; true/false
+    fields get --name and --no-name. Each sets ``args.set_<field>``, None when not given."""
+    group = parser.add_argument_group(
+        "settings", "every field of minippo.Config (minippo/config.py); --config KEY=VALUE sets them too"
+    )
+    kinds = field_types()
+    for field in dataclasses.fields(Config):
+        if field.name in skip:
+            continue
+        kind, words = kinds[field.name], field.metadata["choices"]
+        shown = ",".join(map(str, field.default)) if isinstance(field.default, tuple) else field.default
+        shown = "none: off" if shown is None else str(shown).lower() if kind is bool else shown
+        options = dict(dest=f"set_{field.name}", default=None, help=f"{field.metadata['help']} (default: {shown})")
+        if kind is bool:
+            options["action"] = argparse.BooleanOptionalAction
+        else:
+            options["type"] = functools.partial(Config.parse_value, field.name)
+            options["metavar"] = "|".join(words) if words else METAVARS.get(kind, "X" if kind == float | None else "N,N")
+        group.add_argument(flag(field.name), **options)
+
+
+def settings_from_args(args) -> dict:
+    """{field: value} of the fields a command sets: --preset's, then --config's, then each field's own option."""
+    settings = dict(PRESETS[args.preset]) if getattr(args, "preset", None) else {}
+    default = Config()
+    settings |= {key: getattr(default.with_overrides([text]), key) for text in args.config for key in keys([text])}
+    given = {field.name: getattr(args, f"set_{field.name}", None) for field in dataclasses.fields(Config)}
+    return settings | {key: value for key, value in given.items() if value is not None}
+
+
+def keys(texts) -> list[str]:
+    """The fields that --config's KEY=VALUE texts name."""
+    return [text.split("=", 1)[0].strip().replace("-", "_") for text in texts if "=" in text]
 
 
 def config_from_args(args) -> Config:
-    """The Config of ``minippo train`` (and of a sweep's runs): ENV, --steps, --seed, --objective, --config."""
-    config = Config(env_id=args.env_id, total_steps=args.steps, seed=args.seed, objective=args.objective)
-    return config.with_overrides(with_preset(args))
-
-
-def with_preset(args) -> list[str]:
-    """--config's KEY=VALUE texts, after those of --preset (so that --config overrides the preset)."""
-    from minippo.presets import preset_overrides
-
-    return (preset_overrides(args.preset) if getattr(args, "preset", None) else []) + list(args.config)
-
-
-def config_help() -> str:
-    """Every Config field with its default and its comment in minippo/ppo.py, for ``--help``."""
-    lines = ["Config fields for --config KEY=VALUE (default, then meaning):"]
-    for name, (default, comment) in Config.field_help().items():
-        if name not in FLAGS:
-            shown = ",".join(map(str, default)) if isinstance(default, tuple) else default
-            lines.append(f"  {name}={shown}  {comment}")
-    return "\n".join(lines)
+    """The Config of ``minippo train``: ENV, --steps, then --preset, --config and the fields' own options."""
+    return Config(env_id=args.env_id, total_steps=args.steps, **settings_from_args(args))
 
 
 def cmd_train(args) -> int:
-    from minippo.ppo import checkpoint_update, train
+    from minippo.checkpoint import checkpoint_update
+    from minippo.ppo import train
 
     out = Path(args.out)
     if args.resume:
@@ -232,7 +258,7 @@ def cmd_sweep(args) -> int:
     for key, _ in grid:
         if key in ("env_id", "seed", "total_steps"):
             raise MinippoError(f"--grid {key}: give the tasks, --seeds and --steps instead")
-    runs = sweep.plan(args.env_ids, seeds, args.steps, grid, args.objective, with_preset(args))
+    runs = sweep.plan(args.env_ids, seeds, args.steps, grid, settings_from_args(args))
     from minippo.envs import make_env
 
     for env_id in args.env_ids:  # an unknown id is refused before Ray starts
@@ -288,7 +314,6 @@ def build_parser() -> Parser:
         help="train PPO on a Gymnasium environment",
         description="Train PPO (Algorithm 1 with the paper's MuJoCo settings) and write the run folder: config.json, "
         "progress.csv (one row per update), policy.npz, checkpoint.npz and curve.png.",
-        epilog=config_help(),
         formatter_class=lambda prog: HelpWithDefaults(prog, width=120),
     )
     p.add_argument(
@@ -302,17 +327,16 @@ def build_parser() -> Parser:
         help="environment steps to train (required unless --resume); a run is whole updates of N·T steps, so a "
         "number that is not a multiple is cut down to one (and said)",
     )
-    p.add_argument("--seed", type=int, default=1, help="seeds the networks, the sampling and the environments")
     p.add_argument("--out", required=True, help="the run folder to write (created if missing)")
-    p.add_argument("--objective", choices=OBJECTIVES, default="clip", help=Config.field_help()["objective"][1])
-    p.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE",
-                   help="override any field of minippo.Config, e.g. horizon=512 entropy_coef=0.01")  # fmt: skip
     p.add_argument("--preset", choices=PRESET_NAMES,
                    help="start from named settings (minippo/presets.py): atari is the paper's Table 5 on MinAtar's "
-                   "network, a2c its A2C baseline; --config overrides them")  # fmt: skip
+                   "network, a2c its A2C baseline; the options below override them")  # fmt: skip
+    p.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE",
+                   help="set fields of minippo.Config by name, e.g. horizon=512 entropy_coef=0.01")  # fmt: skip
     p.add_argument("--force", action="store_true", help="overwrite the run files in an existing --out")
     p.add_argument("--resume", action="store_true", help="continue from --out's last checkpoint")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_config_options(p)
     p.set_defaults(func=cmd_train)
 
     p = sub.add_parser("eval", help="run a saved policy deterministically")
@@ -340,8 +364,7 @@ def build_parser() -> Parser:
     p.add_argument("--seeds", default="1", help="seeds: 1-3, 1,4,7 (default 1)")
     p.add_argument("--steps", type=int, help="environment steps per run (required)")
     p.add_argument("--grid", action="append", default=[], metavar="KEY=V1,V2", help="a Config field and its values")
-    p.add_argument("--objective", choices=OBJECTIVES, default="clip", help=Config.field_help()["objective"][1])
-    p.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE", help="override Config fields in every run")
+    p.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE", help="set Config fields in every run")
     p.add_argument("--preset", choices=PRESET_NAMES, help="start every run from named settings (as minippo train)")
     p.add_argument("--out", required=True, help="the folder of run folders (and of sweep.csv)")
     p.add_argument("--csv", help="the sweep's CSV (default OUT/sweep.csv)")
@@ -349,6 +372,7 @@ def build_parser() -> Parser:
     p.add_argument("--address", help="a running Ray cluster, HOST:PORT (default: $RAY_ADDRESS, else this machine)")
     p.add_argument("--retries", type=int, default=0, help="tries again a failed run this many times")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_config_options(p, skip=("env_id", "total_steps", "seed"))
     p.set_defaults(func=cmd_sweep)
 
     p = sub.add_parser("grade", help="grade your exercises, chapter by chapter (or a whole class with --class)")
@@ -372,11 +396,13 @@ def build_parser() -> Parser:
 
 
 def from_preset(args, field: str) -> str | None:
-    """The --preset that set ``field`` (None when no preset did, or when --config set it again)."""
+    """The --preset that set ``field`` (None when no preset did, or when --config or the field's option set it)."""
     preset = getattr(args, "preset", None)
     if not preset or field not in PRESETS[preset]:
         return None
-    return None if any(text.split("=")[0].strip() == field for text in args.config) else preset
+    if field in keys(args.config) or getattr(args, f"set_{field}", None) is not None:
+        return None
+    return preset
 
 
 def main(argv=None) -> int:
@@ -386,14 +412,13 @@ def main(argv=None) -> int:
         return args.func(args)
     except ConfigError as error:  # a field's message, in the words of the option that set it
         message = str(error)
-        flag = FLAGS.get(error.field)
         preset = from_preset(args, error.field) if args is not None and error.field else None
-        if flag is not None and message.startswith(error.field):
-            message = flag + message[len(error.field) :]
-        elif preset is not None:
+        if preset is not None:
             message = f"--preset {preset}: {message}"
         elif error.field and message.startswith(error.field):
-            message = f"--config {message}"
+            by_config = args is not None and error.field in keys(args.config)
+            by_config = by_config and getattr(args, f"set_{error.field}", None) is None
+            message = (f"--config {error.field}" if by_config else flag(error.field)) + message[len(error.field) :]
         elif not error.field:
             message = f"--config: {message}"
         print(f"minippo: error: {message}", file=sys.stderr)

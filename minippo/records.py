@@ -1,13 +1,32 @@
-"""CSV records (progress.csv, a sweep's CSV) and the commit of the code that wrote them."""
+"""Files written whole or not at all, CSV records (progress.csv, a sweep's CSV, the benchmarks') and the commit of
+the code that wrote them."""
 
 from __future__ import annotations
 
 import csv
+import io
 import os
 import subprocess
 from pathlib import Path
 
 from minippo.errors import MinippoError
+
+
+def write_atomically(path, write) -> None:
+    """Write ``path`` with ``write(handle)`` (a binary file) into a temporary file beside it, flushed to disk, then
+    rename it over ``path``: a reader finds the old file or the new one, never part of one. On any failure (a full
+    disk, a second Ctrl-C) the temporary file is removed, the old file is left as it was, and the error goes on up."""
+    path = Path(path)
+    tmp = path.with_name(f"{path.stem}.tmp{path.suffix}")
+    try:
+        with open(tmp, "wb") as handle:
+            write(handle)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def read_rows(path) -> list[dict]:
@@ -31,6 +50,17 @@ def append_row(path, fields: list[str], row: dict) -> None:
         writer.writerow({key: row.get(key, "") for key in fields})
         handle.flush()
         os.fsync(handle.fileno())
+
+
+def write_rows(path, fields: list[str], rows) -> None:
+    """``rows`` (dicts) as the CSV file ``path`` with the columns ``fields``, written whole or not at all."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    table = io.StringIO(newline="")
+    writer = csv.DictWriter(table, fieldnames=fields, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows({key: row.get(key, "") for key in fields} for row in rows)
+    write_atomically(path, lambda handle: handle.write(table.getvalue().encode()))
 
 
 def check_columns(path, fields: list[str]) -> None:

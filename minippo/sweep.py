@@ -47,8 +47,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from minippo.config import Config
 from minippo.errors import MinippoError
-from minippo.ppo import Config
 from minippo.records import append_row, check_columns, commit_of_code, read_rows
 
 RESULT_FIELDS = [
@@ -132,31 +132,35 @@ def parse_grid(texts: list[str]) -> list[tuple[str, list]]:
     return grid
 
 
-def plan(envs, seeds, steps, grid=(), objective="clip", overrides=()) -> list[Run]:
+def plan(envs, seeds, steps, grid=(), settings=None) -> list[Run]:
     """The runs of a sweep in the order they start: task by task, then grid point, then seed.
 
-    ``grid``: [(Config field, [values])] from ``parse_grid``, every combination; ``overrides``: 'key=value' texts
-    for every run (as ``minippo train --config``)."""
-    fixed = Config().with_overrides(overrides)
-    base = {text.split("=", 1)[0].strip().replace("-", "_") for text in overrides}
+    ``grid``: [(Config field, [values])] from ``parse_grid``, every combination; ``settings``: {Config field: value}
+    for every run (as ``minippo train``'s options set them)."""
+    settings = dict(settings or {})
     for key, _ in grid:
-        if key in base or (key == "objective" and objective != "clip"):
-            raise MinippoError(f"{key} is both swept (--grid) and fixed (--config or --objective)")
+        if key in settings:
+            raise MinippoError(f"{key} is both swept (--grid) and fixed (--config, --preset or its own option)")
     runs = []
     for env_id in envs:
         for point in itertools.product(*[[(key, value) for value in values] for key, values in grid]):
-            settings = {**{key: getattr(fixed, key) for key in base}, **dict(point)}
-            run_objective = settings.pop("objective", objective)
-            options = ["--objective", run_objective] if run_objective != "clip" else []
-            pairs = [f"{key}={text(value)}" for key, value in settings.items()]
-            options += ["--config", *pairs] if pairs else []
+            fields = {**settings, **dict(point)}
+            options = [word for key, value in fields.items() for word in option(key, value)]
             shown = {key: text(value, "x") for key, value in point}
             for seed in seeds:
-                config = Config(env_id=env_id, total_steps=steps, seed=seed, objective=run_objective, **settings)
+                config = Config(env_id=env_id, total_steps=steps, seed=seed, **fields)
                 config.validate()
                 name = "-".join([env_id, *(f"{key}={value}" for key, value in shown.items()), f"seed{seed}"])
                 runs.append(Run(name, config, {"env": env_id, "seed": seed, **shown}, options))
     return runs
+
+
+def option(key: str, value) -> list[str]:
+    """The ``minippo train`` words that set the Config field ``key`` to ``value``: --lr 0.001, --no-anneal-lr."""
+    name = key.replace("_", "-")
+    if isinstance(value, bool):
+        return [f"--{name}" if value else f"--no-{name}"]
+    return [f"--{name}", text(value)]
 
 
 def text(value, between: str = ",") -> str:
@@ -176,7 +180,8 @@ def train_run(config_dict: dict, name: str = "", board=None, resume: dict | None
     run carries on as it would have (a retry after its worker died)."""
     from threadpoolctl import threadpool_limits
 
-    from minippo.ppo import checkpoint_update, train
+    from minippo.checkpoint import checkpoint_update
+    from minippo.ppo import train
 
     config = Config.from_dict(config_dict)
     total = config.num_updates * config.batch_size

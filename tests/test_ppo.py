@@ -1,6 +1,7 @@
 """The assembled algorithm: the whole loss gradient by finite differences, determinism, learning, checkpoints."""
 
 import csv
+import dataclasses
 
 import numpy as np
 import pytest
@@ -11,9 +12,10 @@ from minippo.agent import ActorCritic, load_policy, save_policy
 from minippo.errors import NonFiniteError
 from minippo.normalization import ObservationNormalizer, RewardScaler, RunningMeanStd
 from minippo.optimizer import Adam
-from minippo.ppo import PROGRESS_FIELDS, loss_and_grad, update_minibatch
+from minippo.ppo import loss_and_grad, update_minibatch
 from minippo.presets import CARTPOLE_PPO, MUJOCO
 from minippo.rollout import Rollout
+from minippo.run_folder import PROGRESS_FIELDS
 
 TIMING = {"steps_per_s", "wall_s"}
 
@@ -168,8 +170,7 @@ def test_interrupted_run_resumes_from_its_checkpoint(tmp_path):
     config = Config(**CARTPOLE, total_steps=2048, seed=5, checkpoint_every=2)
     train(config, out=tmp_path)
     first = read_rows(tmp_path / "progress.csv")
-    config.total_steps = 4096
-    train(config, out=tmp_path, resume=True)
+    train(dataclasses.replace(config, total_steps=4096), out=tmp_path, resume=True)
     rows = read_rows(tmp_path / "progress.csv")
     assert [int(r["update"]) for r in rows] == list(range(1, 9))
     assert rows[:4] == first

@@ -62,7 +62,7 @@ def test_seeds_grid_and_plan():
     assert sweep.parse_seeds("1-3") == [1, 2, 3] and sweep.parse_seeds("1-2,7") == [1, 2, 7]
     grid = sweep.parse_grid(["clip_epsilon=0.1,0.3", "hidden_sizes=32x32,64", "anneal_lr=false,true"])
     assert grid == [("clip_epsilon", [0.1, 0.3]), ("hidden_sizes", [(32, 32), (64,)]), ("anneal_lr", [False, True])]
-    runs = sweep.plan(["CartPole-v1", "Acrobot-v1"], [1, 2], 4096, grid[:2], "klpen", ["kl_target=0.003"])
+    runs = sweep.plan(["CartPole-v1", "Acrobot-v1"], [1, 2], 4096, grid[:2], {"objective": "klpen", "kl_target": 0.003})
     assert len(runs) == 2 * 2 * 2 * 2
     first = runs[0]
     assert first.name == "CartPole-v1-clip_epsilon=0.1-hidden_sizes=32x32-seed1"
@@ -71,7 +71,7 @@ def test_seeds_grid_and_plan():
     assert first.config.hidden_sizes == (32, 32) and first.config.total_steps == 4096
     assert first.command("out") == (
         "minippo train CartPole-v1 --steps 4096 --seed 1 --out out/CartPole-v1-clip_epsilon=0.1-hidden_sizes=32x32-"
-        "seed1 --quiet --objective klpen --config kl_target=0.003 clip_epsilon=0.1 hidden_sizes=32,32"
+        "seed1 --quiet --objective klpen --kl-target 0.003 --clip-epsilon 0.1 --hidden-sizes 32,32"
     )
     assert [run.config.env_id for run in runs[-4:]] == ["Acrobot-v1"] * 4
 

@@ -3,6 +3,7 @@ on random float64 minibatches, for every objective, both action kinds and both n
 gradient and the parameters after four Adam steps agree to rounding. Skipped where PyTorch is not installed."""
 
 import csv
+import dataclasses
 
 import pytest
 
@@ -29,7 +30,7 @@ def test_a_wrong_term_is_caught():
     theta = torch.tensor(agent.params, requires_grad=True)
     torch_bridge.loss_and_grad(theta, agent, mb, config)
     with_bonus = theta.grad.clone()
-    config.entropy_coef = 0.0
+    config = dataclasses.replace(config, entropy_coef=0.0)
     torch_bridge.loss_and_grad(theta, agent, mb, config)
     assert float((with_bonus - theta.grad).abs().max()) > 1e3 * TOLERANCE
 

@@ -2,6 +2,7 @@
 book/_torch_bridge.py, in float64), and it learns CartPole-v1. Skipped where PyTorch is not installed."""
 
 import csv
+import dataclasses
 
 import numpy as np
 import pytest
@@ -18,7 +19,9 @@ SEED, BUDGET, SOLVED = 1, 150_000, 195.0  # the record's first seed and step bud
 
 def test_the_nn_module_loss_is_minippos_loss_with_the_same_gradient():
     agent, mb, config = torch_bridge.random_case("discrete", False, "clip", seed=3)
-    config.clip_value_loss = False  # the PyTorch PPO, as CleanRL's with clip_vloss off, has no value clipping
+    config = dataclasses.replace(
+        config, clip_value_loss=False
+    )  # the PyTorch PPO, as CleanRL's with clip_vloss off, has no value clipping
     loss, _ = minippo_loss_and_grad(agent, mb, config)
     module = torch_ppo.Agent(mb["obs"].shape[1], agent.act_dim, hidden=config.hidden_sizes[0]).double()
     weights, _ = torch_bridge.layers(torch.tensor(agent.params), agent)
