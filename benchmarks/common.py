@@ -3,13 +3,12 @@ running ``minippo.sweep.Run``s on minippo sweep's engine into a record of the ru
 
 from __future__ import annotations
 
-import csv
 import functools
-import os
 import shlex
 import sys
 from pathlib import Path
 
+from minippo import records
 from minippo.errors import MinippoError
 from minippo.records import append_row, check_columns, commit_of_code, read_rows
 
@@ -74,15 +73,8 @@ def compact_progress(run_dir, digits: int = 6) -> None:
 
 def write_rows(path, rows: list[dict], fields=None) -> Path:
     """``rows`` as the CSV file ``path``, whole or not at all; ``fields``: its columns (by default the first row's)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp.csv")
-    with open(tmp, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fields or (list(rows[0]) if rows else ["empty"]), lineterminator="\n")
-        writer.writeheader()
-        writer.writerows(rows)
-    os.replace(tmp, path)
-    return path
+    records.write_rows(path, fields or (list(rows[0]) if rows else ["empty"]), rows)
+    return Path(path)
 
 
 def add_sweep_options(parser) -> None:

@@ -58,7 +58,7 @@ def steps_notice(config) -> str | None:
 
 
 FLAGS = {"env_id": "ENV", "total_steps": "--steps"}  # the fields whose option is not --field-name
-METAVARS = {int: "N", float: "X", str: "WORD", bool: None}
+METAVARS = {int: "N", float: "X", float | None: "X", str: "WORD"}
 
 
 def flag(name: str) -> str:
@@ -84,7 +84,7 @@ def add_config_options(parser, skip=("env_id", "total_steps")) -> None:
             options["action"] = argparse.BooleanOptionalAction
         else:
             options["type"] = functools.partial(Config.parse_value, field.name)
-            options["metavar"] = "|".join(words) if words else METAVARS.get(kind, "X" if kind == float | None else "N,N")
+            options["metavar"] = "|".join(words) if words else METAVARS.get(kind, "N,N")
         group.add_argument(flag(field.name), **options)
 
 

@@ -88,19 +88,3 @@ A2C = dict(
 # the names ``minippo train --preset`` and ``minippo sweep --preset`` know
 PRESETS = {"atari": ATARI, "a2c": A2C, "mujoco": MUJOCO}
 
-
-def preset_overrides(name: str) -> list[str]:
-    """A preset as the KEY=VALUE texts of ``--config``, so that a command's own --config can still override it."""
-    if name not in PRESETS:
-        raise KeyError(name)
-    texts = []
-    for key, value in PRESETS[name].items():
-        text = (
-            ",".join(map(str, value))
-            if isinstance(value, tuple)
-            else str(value).lower()
-            if isinstance(value, bool)
-            else str(value)
-        )
-        texts.append(f"{key}={text}")
-    return texts

@@ -43,11 +43,12 @@ import socket
 import sys
 import tempfile
 import threading
+import typing
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from minippo.config import Config
+from minippo.config import Config, field_types
 from minippo.errors import MinippoError
 from minippo.records import append_row, check_columns, commit_of_code, read_rows
 
@@ -124,7 +125,7 @@ def parse_grid(texts: list[str]) -> list[tuple[str, list]]:
         words = [word.strip() for word in raw.split(",") if word.strip()]
         if not words:
             raise MinippoError(f"--grid {key}: no values")
-        tuple_field = isinstance(Config.field_help().get(key, (None,))[0], tuple)
+        tuple_field = typing.get_origin(field_types().get(key)) is tuple
         values = [Config.parse_value(key, word.replace("x", ",") if tuple_field else word) for word in words]
         if len(set(map(repr, values))) != len(values):
             raise MinippoError(f"--grid {key} names a value twice")

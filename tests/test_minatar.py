@@ -1,5 +1,6 @@
 """PPO from images: the conv actor-critic in the whole loss, MinAtar through Gymnasium, the Atari preset, A2C."""
 
+import dataclasses
 import importlib.util
 
 import numpy as np
@@ -10,7 +11,7 @@ from minippo import losses
 from minippo.agent import ActorCritic
 from minippo.cli import main
 from minippo.ppo import Config, Trainer, loss_and_grad, train
-from minippo.presets import A2C, ATARI, CARTPOLE_PPO, preset_overrides
+from minippo.presets import A2C, ATARI, CARTPOLE_PPO, PRESETS
 
 needs_minatar = pytest.mark.skipif(
     importlib.util.find_spec("minatar") is None, reason="MinAtar is not installed (pip install 'minippo[minatar]')"
@@ -56,9 +57,9 @@ def test_cnn_needs_images_and_a_shared_trunk():
         Config(network="resnet").validate()
 
 
-def test_presets_read_back_through_config_overrides():
-    for preset, name in ((ATARI, "atari"), (A2C, "a2c")):
-        config = Config().with_overrides(preset_overrides(name))
+def test_presets_are_valid_configs():
+    for preset in PRESETS.values():
+        config = dataclasses.replace(Config(), **preset)
         assert all(getattr(config, key) == value for key, value in preset.items())
         config.validate()
     assert (ATARI["num_envs"] * ATARI["horizon"], ATARI["epochs"], ATARI["minibatch_size"]) == (1024, 3, 256)
