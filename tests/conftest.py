@@ -30,7 +30,7 @@ BOOK_HTML = ROOT / "book" / "_build" / "html"
 
 def _newest_source_mtime() -> float:
     sources = [p for p in (ROOT / "book").rglob("*") if "_build" not in p.parts and p.is_file()]
-    sources += list((ROOT / "minippo").glob("*.py"))
+    sources += list((ROOT / "minippo").rglob("*.py"))
     return max(p.stat().st_mtime for p in sources)
 
 
@@ -68,3 +68,32 @@ def ray_environment():
         patch.setenv("PYTHONPATH", os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
         patch.delenv("RAY_ADDRESS", raising=False)
         yield
+
+
+# Tiers. A plain ``pytest`` runs the quick tier, what a contributor runs after every change (about two minutes on two
+# cores); the others are named by markers, registered in pyproject.toml: ``slow`` (learning runs and long
+# end-to-end runs), ``book`` (tests of the built book: the first builds it), ``browser`` (headless Chromium on the
+# built pages), ``ray`` (sweeps on a local Ray). ``pytest --all`` runs every tier (CI does); ``pytest -m book`` one;
+# naming files or tests (``pytest tests/test_book.py``) runs every test named, whatever its tier.
+TIERS = ("slow", "book", "browser", "ray")
+BY_FIXTURE = {"built_book": "book", "ray_environment": "ray"}  # a test that takes the fixture is in the tier
+
+
+def pytest_addoption(parser):
+    parser.addoption("--all", action="store_true", help="run every tier (slow, book, browser, ray), as CI does")
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        for fixture, tier in BY_FIXTURE.items():
+            if fixture in item.fixturenames:
+                item.add_marker(tier)
+        if item.path.name.endswith("_browser.py"):
+            item.add_marker("browser")
+    named = config.args_source != pytest.Config.ArgsSource.TESTPATHS  # files or tests named on the command line
+    if config.getoption("--all") or config.getoption("-m") or named:
+        return
+    quick = [item for item in items if not any(item.get_closest_marker(tier) for tier in TIERS)]
+    if len(quick) < len(items):
+        config.hook.pytest_deselected(items=[item for item in items if item not in quick])
+        items[:] = quick

@@ -26,6 +26,8 @@ kernelspec:
 
 ```{{code-cell}} ipython3
 import json, time
+
+pytestmark = pytest.mark.book  # small books built with jupyter-book
 started = time.time()
 time.sleep(4)
 {body}

@@ -9,6 +9,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.book  # small books' pages executed under several draws
+
 ROOT = Path(__file__).resolve().parent.parent
 spec = importlib.util.spec_from_file_location("check_claims", ROOT / "tools" / "check_claims.py")
 check_claims = importlib.util.module_from_spec(spec)

@@ -152,6 +152,7 @@ def test_same_seed_same_progress_bitwise(tmp_path, env_id):
 CARTPOLE = CARTPOLE_PPO
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(240)
 def test_cartpole_learns():
     rows = train(Config(**CARTPOLE, total_steps=50_176, seed=3))
@@ -159,6 +160,7 @@ def test_cartpole_learns():
     assert rows[-1]["return_mean"] > 150, rows[-1]
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_inverted_pendulum_learns():
     rows = train(Config(env_id="InvertedPendulum-v5", total_steps=30_720, horizon=1024, seed=1))

@@ -23,6 +23,8 @@ from minippo.cli import main
 from minippo.envs import env_state, load_env_state, make_env
 from minippo.minatar import GAMES
 
+pytestmark = pytest.mark.slow  # runs killed and resumed, in processes of their own
+
 TIMING = {"steps_per_s", "wall_s"}  # the clock columns, the only ones that differ between two identical runs
 RUNS = {  # small runs: 24 updates of one batch each, a checkpoint after every update
     "CartPole-v1": ["horizon=128", "minibatch_size=64", "epochs=2", "checkpoint_every=1"],

@@ -54,6 +54,7 @@ def test_a_value_of_shape_n_by_1_makes_an_n_by_n_loss():
     assert ((values[:, 0] - returns) ** 2).mean().item() == 0
 
 
+@pytest.mark.slow
 def test_the_pytorch_ppo_learns_cartpole():
     torch.set_num_threads(1)
     returns, stats = torch_ppo.train(torch_ppo.Args(seed=SEED, total_steps=BUDGET))
