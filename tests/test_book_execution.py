@@ -11,6 +11,8 @@ from pathlib import Path
 import pytest
 from conftest import ROOT
 
+pytestmark = pytest.mark.book  # small books built with jupyter-book
+
 PAGE = """\
 ---
 jupytext:
@@ -26,8 +28,6 @@ kernelspec:
 
 ```{{code-cell}} ipython3
 import json, time
-
-pytestmark = pytest.mark.book  # small books built with jupyter-book
 started = time.time()
 time.sleep(4)
 {body}
