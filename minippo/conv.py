@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from minippo.network import linear_backward, linear_forward, orthogonal
+from minippo.network import flat_views, linear_backward, linear_forward, orthogonal
 
 
 def patches(x: np.ndarray, kh: int, kw: int) -> np.ndarray:
@@ -103,12 +103,7 @@ class ConvTrunk:
         self.grads = np.zeros(self.n_params) if grads is None else grads
         if self.params.shape != (self.n_params,) or self.grads.shape != (self.n_params,):
             raise ValueError(f"ConvTrunk{self.image_shape} needs flat buffers of {self.n_params} parameters")
-        views, grad_views, offset = [], [], 0
-        for shape in shapes:
-            size = int(np.prod(shape))
-            views.append(self.params[offset : offset + size].reshape(shape))
-            grad_views.append(self.grads[offset : offset + size].reshape(shape))
-            offset += size
+        views, grad_views = flat_views(self.params, self.grads, shapes)
         self.K, self.conv_b, self.W, self.b = views
         self.grad_K, self.grad_conv_b, self.grad_W, self.grad_b = grad_views
 

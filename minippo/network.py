@@ -50,6 +50,18 @@ def tanh_backward(h: np.ndarray, grad_h: np.ndarray) -> np.ndarray:
     return grad_h * (1.0 - h * h)
 
 
+def flat_views(params: np.ndarray, grads: np.ndarray, shapes) -> tuple[list, list]:
+    """Views of one flat parameter vector and of its gradient, shaped as ``shapes`` in turn: the layers' weights
+    live in one array, so that Adam and the gradient checks see one vector."""
+    views, grad_views, offset = [], [], 0
+    for shape in shapes:
+        size = int(np.prod(shape))
+        views.append(params[offset : offset + size].reshape(shape))
+        grad_views.append(grads[offset : offset + size].reshape(shape))
+        offset += size
+    return views, grad_views
+
+
 class MLP:
     """Linear layers with tanh between them (and optionally after the last one).
 
@@ -76,15 +88,8 @@ class MLP:
         self.grads = np.zeros(self.n_params) if grads is None else grads
         if self.params.shape != (self.n_params,) or self.grads.shape != (self.n_params,):
             raise ValueError(f"MLP{self.sizes} needs flat buffers of {self.n_params} parameters")
-        self.W, self.b, self.grad_W, self.grad_b = [], [], [], []
-        offset = 0
-        for fan_in, fan_out in shapes:
-            pieces = ((self.W, self.grad_W, (fan_in, fan_out)), (self.b, self.grad_b, (fan_out,)))
-            for store, grad_store, shape in pieces:
-                size = int(np.prod(shape))
-                store.append(self.params[offset : offset + size].reshape(shape))
-                grad_store.append(self.grads[offset : offset + size].reshape(shape))
-                offset += size
+        views, grad_views = flat_views(self.params, self.grads, [s for i, o in shapes for s in ((i, o), (o,))])
+        self.W, self.b, self.grad_W, self.grad_b = views[0::2], views[1::2], grad_views[0::2], grad_views[1::2]
         if rng is not None:
             self.init(rng, out_gain, hidden_gain, orthogonal_init)
 
