@@ -107,52 +107,80 @@ def config_from_args(args) -> Config:
     return Config(env_id=args.env_id, total_steps=args.steps, **settings_from_args(args))
 
 
+def resumed_config(args, out: Path) -> Config | None:
+    """The Config of the run in ``out`` that --resume continues (with --steps, extended), or None when it has
+    finished already (and said so)."""
+    from minippo.checkpoint import checkpoint_update
+
+    done = checkpoint_update(out)
+    if done is None and (out / "checkpoint.npz").exists():
+        raise MinippoError(f"--resume: cannot read {out / 'checkpoint.npz'}")
+    if done is None:
+        raise MinippoError(f"--resume: no checkpoint in {out}")
+    try:
+        config = Config.from_dict(json.loads((out / "config.json").read_text()))
+    except (FileNotFoundError, json.JSONDecodeError) as error:
+        raise MinippoError(f"--resume: cannot read {out / 'config.json'} ({error})")
+    trained = done * config.batch_size
+    if args.steps is not None and args.steps != config.total_steps:
+        extended = dataclasses.replace(config, total_steps=args.steps).validate()
+        if extended.num_updates < done:
+            raise MinippoError(
+                f"--resume --steps {args.steps:,}: the run has already trained {trained:,} steps ({done} updates)"
+            )
+        if config.anneal_lr and extended.num_updates != config.num_updates:
+            print(
+                f"minippo: the learning rate of updates 1-{done} was annealed over {config.num_updates} updates, "
+                f"not {extended.num_updates}: the extended run differs from one trained to {args.steps:,} steps "
+                "from the start (--no-anneal-lr makes runs that extend exactly)",
+                file=sys.stderr,
+            )
+        config = extended
+    if done >= config.num_updates:
+        print(
+            f"minippo: {out} has finished ({trained:,} steps, {done} updates); to train it further: minippo train "
+            f"{config.env_id} --out {out} --resume --steps N, N > {trained:,}",
+            file=sys.stderr,
+        )
+        return None
+    return config
+
+
+def new_config(args, out: Path) -> Config:
+    """The Config of a new run into ``out`` (emptied of an earlier run's files with --force)."""
+    if out.exists() and any(out.iterdir()):
+        if not args.force:
+            raise MinippoError(f"{out} exists and is not empty; pass --force to overwrite or --resume to continue")
+        for name in RUN_FILES:
+            (out / name).unlink(missing_ok=True)
+    if args.steps is None:
+        raise MinippoError("--steps is required")
+    return config_from_args(args)
+
+
+def progress_bar(config: Config):
+    """A tqdm bar on stderr, counting the run's environment steps."""
+    from tqdm import tqdm
+
+    return tqdm(
+        total=config.num_updates * config.batch_size,
+        unit="step",
+        dynamic_ncols=True,
+        desc=config.env_id,
+        file=sys.stderr,
+        # tqdm's own rate would count the start-up too; the trainer's steps/s in the postfix is the one rate
+        bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} [{elapsed}<{remaining}{postfix}]",
+    )
+
+
 def cmd_train(args) -> int:
     from minippo.checkpoint import checkpoint_update
     from minippo.ppo import train
 
     out = Path(args.out)
-    if args.resume:
-        done = checkpoint_update(out)
-        if done is None and (out / "checkpoint.npz").exists():
-            raise MinippoError(f"--resume: cannot read {out / 'checkpoint.npz'}")
-        if done is None:
-            raise MinippoError(f"--resume: no checkpoint in {out}")
-        try:
-            config = Config.from_dict(json.loads((out / "config.json").read_text()))
-        except (FileNotFoundError, json.JSONDecodeError) as error:
-            raise MinippoError(f"--resume: cannot read {out / 'config.json'} ({error})")
-        trained = done * config.batch_size
-        if args.steps is not None and args.steps != config.total_steps:
-            extended = dataclasses.replace(config, total_steps=args.steps).validate()
-            if extended.num_updates < done:
-                raise MinippoError(
-                    f"--resume --steps {args.steps:,}: the run has already trained {trained:,} steps ({done} updates)"
-                )
-            if config.anneal_lr and extended.num_updates != config.num_updates:
-                print(
-                    f"minippo: the learning rate of updates 1-{done} was annealed over {config.num_updates} updates, "
-                    f"not {extended.num_updates}: the extended run differs from one trained to {args.steps:,} steps "
-                    "from the start (anneal_lr=false makes runs that extend exactly)",
-                    file=sys.stderr,
-                )
-            config = extended
-        if done >= config.num_updates:
-            print(
-                f"minippo: {out} has finished ({trained:,} steps, {done} updates); to train it further: minippo train "
-                f"{config.env_id} --out {out} --resume --steps N, N > {trained:,}",
-                file=sys.stderr,
-            )
-            return 0
-    else:
-        if out.exists() and any(out.iterdir()):
-            if not args.force:
-                raise MinippoError(f"{out} exists and is not empty; pass --force to overwrite or --resume to continue")
-            for name in RUN_FILES:
-                (out / name).unlink(missing_ok=True)
-        if args.steps is None:
-            raise MinippoError("--steps is required")
-        config = config_from_args(args)
+    config = resumed_config(args, out) if args.resume else new_config(args, out)
+    if config is None:
+        return 0
     config.validate()
     from minippo.envs import make_env
 
@@ -161,19 +189,7 @@ def cmd_train(args) -> int:
     if notice and not args.resume:
         print(f"minippo: {notice}", file=sys.stderr)
 
-    bar = None
-    if not args.quiet:
-        from tqdm import tqdm
-
-        bar = tqdm(
-            total=config.num_updates * config.batch_size,
-            unit="step",
-            dynamic_ncols=True,
-            desc=config.env_id,
-            file=sys.stderr,
-            # tqdm's own rate would count the start-up too; the trainer's steps/s in the postfix is the one rate
-            bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} [{elapsed}<{remaining}{postfix}]",
-        )
+    bar = None if args.quiet else progress_bar(config)
 
     def on_update(row):
         if bar is not None:
