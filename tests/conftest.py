@@ -30,7 +30,7 @@ BOOK_HTML = ROOT / "book" / "_build" / "html"
 
 def _newest_source_mtime() -> float:
     sources = [p for p in (ROOT / "book").rglob("*") if "_build" not in p.parts and p.is_file()]
-    sources += list((ROOT / "minippo").glob("*.py"))
+    sources += list((ROOT / "minippo").rglob("*.py"))
     return max(p.stat().st_mtime for p in sources)
 
 

@@ -5,12 +5,12 @@ import numpy as np
 import pytest
 from conftest import assert_close, numerical_gradient
 
-from minippo import language as lm
 from minippo.distributions import Categorical
-from minippo.dpo import DPOConfig, dpo_loss, dpo_loss_and_grad, response_tokens, sequence_log_probs, train_dpo
-from minippo.grpo import GRPOConfig, group_advantages, grpo_objective, k3, train_grpo
-from minippo.reward_model import make_preferences
-from minippo.rlhf import (
+from minippo.lm import language as lm
+from minippo.lm.dpo import DPOConfig, dpo_loss, dpo_loss_and_grad, response_tokens, sequence_log_probs, train_dpo
+from minippo.lm.grpo import GRPOConfig, group_advantages, grpo_objective, k3, train_grpo
+from minippo.lm.reward_model import make_preferences
+from minippo.lm.rlhf import (
     all_prompts,
     mean_kl,
     optimal_log_probs,

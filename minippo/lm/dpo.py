@@ -20,10 +20,10 @@ import numpy as np
 
 from minippo.agent import ActorCritic
 from minippo.distributions import Categorical
-from minippo.language import PROMPT_LEN, sequence_features
+from minippo.lm.language import PROMPT_LEN, sequence_features
+from minippo.lm.reward_model import bradley_terry_loss
+from minippo.lm.rlhf import copy_model
 from minippo.optimizer import Adam, clip_grad_norm
-from minippo.reward_model import bradley_terry_loss
-from minippo.rlhf import copy_model
 
 
 @dataclass

@@ -22,7 +22,7 @@ from minippo import advantages as adv
 from minippo import losses
 from minippo.agent import ActorCritic
 from minippo.distributions import Categorical
-from minippo.language import (
+from minippo.lm.language import (
     BOS,
     EOS,
     MAX_LEN,
@@ -38,9 +38,9 @@ from minippo.language import (
     prefix_features,
     pretrain,
 )
+from minippo.lm.reward_model import RewardModel, make_preferences, rater_score
 from minippo.optimizer import Adam
 from minippo.ppo import Config, update_minibatch
-from minippo.reward_model import RewardModel, make_preferences, rater_score
 
 
 @dataclass
@@ -273,7 +273,7 @@ def all_prompts(length: int = 3) -> np.ndarray:
     the corpus draws each word uniformly, so these are equally likely."""
     from itertools import product
 
-    from minippo.language import DETERMINERS, NOUNS, VERBS
+    from minippo.lm.language import DETERMINERS, NOUNS, VERBS
 
     words = list(product(*(DETERMINERS, NOUNS, VERBS)[:length]))
     return np.array([[TOKEN[w] for w in prompt] for prompt in words], dtype=np.int64)

@@ -10,7 +10,7 @@ Schulman's (2020) "k3" estimator of KL[π_θ ‖ π_ref], unbiased on tokens sam
 
 The objective is L^CLIP's clipped ratio with these advantages, minus β k3, averaged over each response's tokens and
 then over the responses (Shao et al.'s eq. 3). Everything else is minippo's: the language model, the categorical,
-Adam, and the collection of responses of minippo.rlhf.
+Adam, and the collection of responses of minippo.lm.rlhf.
 
 k3's value is unbiased, but its gradient in the loss is not the gradient of that KL: under a ~ π_θ,
 E[(1 − π_ref/π_θ) ∇log π_θ] = −Σ_a π_ref(a) ∇log π_θ(a) = ∇KL[π_ref ‖ π_θ], the forward KL, token by token (Tang &
@@ -30,10 +30,10 @@ import numpy as np
 from minippo import losses
 from minippo.agent import ActorCritic
 from minippo.distributions import Categorical
-from minippo.language import PROMPT_LEN, make_prompts
+from minippo.lm.language import PROMPT_LEN, make_prompts
+from minippo.lm.reward_model import RewardModel
+from minippo.lm.rlhf import collect, copy_model, sequence_stats
 from minippo.optimizer import Adam, clip_grad_norm
-from minippo.reward_model import RewardModel
-from minippo.rlhf import collect, copy_model, sequence_stats
 
 
 @dataclass
