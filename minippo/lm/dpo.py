@@ -23,6 +23,7 @@ from minippo.distributions import Categorical
 from minippo.lm.language import PROMPT_LEN, sequence_features
 from minippo.lm.reward_model import bradley_terry_loss
 from minippo.lm.rlhf import copy_model
+from minippo.minibatches import minibatch_indices
 from minippo.optimizer import Adam, clip_grad_norm
 
 
@@ -109,9 +110,9 @@ def train_dpo(pretrained: ActorCritic, preferred, rejected, config: DPOConfig, o
     ref_l = sequence_log_probs(reference.nets["policy"], data_l, n)[0]
     history = []
     for epoch in range(1, config.epochs + 1):
-        order, epoch_losses = rng.permutation(n), []
-        for start in range(0, n, config.minibatch_pairs):
-            take = np.sort(order[start : start + config.minibatch_pairs])
+        epoch_losses = []
+        for pairs in minibatch_indices(n, config.minibatch_pairs, rng):
+            take = np.sort(pairs)
             loss = dpo_loss_and_grad(
                 policy, _select(data_w, take), _select(data_l, take), ref_w[take], ref_l[take], config.beta
             )

@@ -33,6 +33,7 @@ from minippo.distributions import Categorical
 from minippo.lm.language import PROMPT_LEN, make_prompts
 from minippo.lm.reward_model import RewardModel
 from minippo.lm.rlhf import collect, copy_model, sequence_stats
+from minippo.minibatches import minibatch_indices
 from minippo.optimizer import Adam, clip_grad_norm
 
 
@@ -133,11 +134,8 @@ def train_grpo(pretrained: ActorCritic, reward_model: RewardModel, config: GRPOC
             returns = returns - config.beta * np.where(inside, batch["logp"] - batch["logp_ref"], 0.0).sum(axis=1)
         grouped = returns.reshape(config.prompts, config.group)
         advantages = group_advantages(grouped, normalize_std=config.normalize_std).reshape(-1)
-        n_responses = len(prompts)
         for _ in range(config.epochs):
-            order = rng.permutation(n_responses)
-            for start in range(0, n_responses, config.minibatch_responses):
-                take = order[start : start + config.minibatch_responses]
+            for take in minibatch_indices(len(prompts), config.minibatch_responses, rng):
                 lengths = batch["lengths"][take]
                 valid = np.arange(batch["logp"].shape[1])[None, :] < lengths[:, None]
                 minibatch = {key: batch[key][take][valid] for key in ("obs", "actions", "logp", "logp_ref")}

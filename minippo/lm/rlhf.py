@@ -39,6 +39,7 @@ from minippo.lm.language import (
     pretrain,
 )
 from minippo.lm.reward_model import RewardModel, make_preferences, rater_score
+from minippo.minibatches import minibatches
 from minippo.optimizer import Adam
 from minippo.ppo import Config, update_minibatch
 
@@ -197,12 +198,9 @@ def train_rlhf(pretrained: ActorCritic, reward_model: RewardModel, config: RLHFC
             "advantages": advantages[valid],
             "returns": returns[valid],
         }
-        n = len(data["logp"])
         for _ in range(config.epochs):
-            order = rng.permutation(n)
-            for start in range(0, n, config.minibatch_size):
-                take = order[start : start + config.minibatch_size]
-                update_minibatch(agent, optimizer, {key: value[take] for key, value in data.items()}, ppo_config)
+            for minibatch in minibatches(data, config.minibatch_size, rng):
+                update_minibatch(agent, optimizer, minibatch, ppo_config)
         logp_after = Categorical(agent.policy_output(data["obs"])).log_prob(data["actions"])
         kl = float(np.mean(np.where(valid, batch["logp"] - batch["logp_ref"], 0.0).sum(axis=1)))
         stats = {
