@@ -22,7 +22,6 @@ from minippo.agent import ActorCritic
 from minippo.distributions import Categorical
 from minippo.lm.language import PROMPT_LEN, sequence_features
 from minippo.lm.reward_model import bradley_terry_loss
-from minippo.lm.rlhf import copy_model
 from minippo.minibatches import minibatch_indices
 from minippo.optimizer import Adam, clip_grad_norm
 
@@ -100,7 +99,7 @@ def train_dpo(pretrained: ActorCritic, preferred, rejected, config: DPOConfig, o
     (tokens, lengths) of whole texts sharing their prompt. ``on_epoch(stats, policy)`` after every epoch.
     Returns (the fine-tuned model, one dict per epoch: the mean loss and the implicit reward margin's accuracy)."""
     rng = np.random.default_rng(config.seed)
-    agent, reference = copy_model(pretrained), copy_model(pretrained)
+    agent, reference = pretrained.copy(), pretrained.copy()
     policy = agent.nets["policy"]
     optimizer = Adam(policy.params, lr=config.lr)
     n = len(preferred[1])

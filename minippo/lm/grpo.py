@@ -32,7 +32,7 @@ from minippo.agent import ActorCritic
 from minippo.distributions import Categorical
 from minippo.lm.language import PROMPT_LEN, make_prompts
 from minippo.lm.reward_model import RewardModel
-from minippo.lm.rlhf import collect, copy_model, sequence_stats
+from minippo.lm.rlhf import collect, sequence_stats
 from minippo.minibatches import minibatch_indices
 from minippo.optimizer import Adam, clip_grad_norm
 
@@ -121,7 +121,7 @@ def train_grpo(pretrained: ActorCritic, reward_model: RewardModel, config: GRPOC
     """Fine-tune a copy of ``pretrained`` (π_ref, never changed) with GRPO. Its value network is never used.
     ``on_update(stats, policy)`` is called after every iteration. Returns (the fine-tuned model, statistics)."""
     rng = np.random.default_rng(config.seed)
-    agent, reference = copy_model(pretrained), copy_model(pretrained)
+    agent, reference = pretrained.copy(), pretrained.copy()
     policy = agent.nets["policy"]
     optimizer = Adam(policy.params, lr=config.lr)
     history = []

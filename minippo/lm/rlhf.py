@@ -101,12 +101,6 @@ def proportional_beta(beta: float, kl: float, kl_target: float, gain: float = 0.
     return beta * (1.0 + gain * error)
 
 
-def copy_model(model: ActorCritic) -> ActorCritic:
-    twin = ActorCritic(model.obs_dim, model.kind, model.act_dim, model.hidden_sizes, dtype=model.dtype)
-    twin.params[...] = model.params
-    return twin
-
-
 def collect(
     agent: ActorCritic,
     reference: ActorCritic,
@@ -181,7 +175,7 @@ def train_rlhf(pretrained: ActorCritic, reward_model: RewardModel, config: RLHFC
 
     Returns (the fine-tuned model, one dict of statistics per iteration)."""
     rng = np.random.default_rng(config.seed)
-    agent, reference = copy_model(pretrained), copy_model(pretrained)
+    agent, reference = pretrained.copy(), pretrained.copy()
     optimizer = Adam(agent.params, lr=config.lr)
     ppo_config = config.ppo_config()
     beta, history = config.beta, []
