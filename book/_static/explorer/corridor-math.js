@@ -292,6 +292,7 @@
     return epsilon * epsilon;
   }
 
+  // eq. 8's rule for beta: minippo.losses.adaptive_beta, which the Python corridor uses
   function adaptiveBeta(beta, kl, klTarget) {
     if (kl < klTarget / 1.5) return beta / 2.0;
     if (kl > klTarget * 1.5) return beta * 2.0;
