@@ -313,6 +313,7 @@ def optimal_log_probs(logp_ref: np.ndarray, scores: np.ndarray, beta: float):
     return logits - log_z[:, None], log_z
 
 
-def mean_kl(logp: np.ndarray, logq: np.ndarray) -> float:
-    """Ê_x KL[p(·|x) ‖ q(·|x)] = Ê_x Σ_y p(y|x) (log p − log q), over the prompts (rows), exactly."""
+def response_kl(logp: np.ndarray, logq: np.ndarray) -> float:
+    """Ê_x KL[p(·|x) ‖ q(·|x)] = Ê_x Σ_y p(y|x) (log p − log q), exactly: the KL between two distributions over
+    the responses y (columns, as response_log_probs gives them), averaged over the prompts x (rows)."""
     return float(np.mean(np.sum(np.exp(logp) * (logp - logq), axis=1)))
