@@ -18,11 +18,12 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import matplotlib.pyplot as plt  # noqa: E402
 from threadpoolctl import threadpool_limits  # noqa: E402
 
-from minippo import corridor  # noqa: E402
 from minippo.gradcheck import central_differences  # noqa: E402
+from minippo.minibatches import minibatches  # noqa: E402
 from minippo.plotting import INK, ORANGE, SAGE  # noqa: E402
 from minippo.ppo import Trainer, compute_advantages, flatten, update_minibatch  # noqa: E402
 from minippo.presets import CARTPOLE_PPO, CARTPOLE_VANILLA  # noqa: E402
+from minippo.toys import corridor  # noqa: E402
 
 threadpool_limits(1, user_api="blas")  # whether NumPy was loaded before this module or not
 
@@ -85,20 +86,17 @@ def epochs_on_one_batch(trainer, data, epochs, measure):
     """``epochs`` passes of minibatch Adam over one batch (Algorithm 1's inner loop, without the early stop), and
     after each pass ``measure(policy)``, with π_θ on the whole batch; returns the list of what it measured."""
     agent, config = trainer.agent, trainer.config
-    n, size = len(data["logp"]), config.minibatch_size
     measured = []
     for _ in range(epochs):
-        order = trainer.rng.permutation(n)
-        for start in range(0, n, size):
-            index = order[start : start + size]
-            update_minibatch(agent, trainer.optimizer, {k: v[index] for k, v in data.items()}, config)
+        for minibatch in minibatches(data, config.minibatch_size, trainer.rng):
+            update_minibatch(agent, trainer.optimizer, minibatch, config)
         out, _, _ = agent.forward(data["obs"])
         measured.append(measure(agent.distribution(out)))
     return measured
 
 
 def corridor_rounds(settings, ticks, changes=None):
-    """Plays the corridor explorer's math (``minippo.corridor``, which the explorer on the page runs step for step)
+    """Plays the corridor explorer's math (``minippo.toys.corridor``, which the explorer on the page runs step for step)
     and sums the run up by round, so that a page can state what the reader will see when playing it.
 
     Returns ``{round: {"records", "max_kl", "broken_at", "end"}}``: the round's records, its largest KL, the first

@@ -81,10 +81,10 @@ LIBRARY_ANSWERS = {
     "ch10_ppo_update": {"minippo.ppo": ["loss_and_grad", "update_minibatch", "Trainer", "train"],
                         "minippo.rollout": ["Rollout"]},
     "ch12_pixels": {"minippo.conv": ["conv2d_forward", "conv2d_backward"]},
-    "ch13_language_model": {"minippo.reward_model": ["bradley_terry_loss", "RewardModel"],
-                            "minippo.rlhf": ["kl_shaped_rewards", "train_rlhf"]},
-    "ch14_grpo_dpo": {"minippo.grpo": ["group_advantages", "grpo_objective", "k3"],
-                      "minippo.dpo": ["dpo_loss", "dpo_loss_and_grad"]},
+    "ch13_language_model": {"minippo.lm.reward_model": ["bradley_terry_loss", "RewardModel"],
+                            "minippo.lm.rlhf": ["kl_shaped_rewards", "train_rlhf"]},
+    "ch14_grpo_dpo": {"minippo.lm.grpo": ["group_advantages", "grpo_objective", "k3"],
+                      "minippo.lm.dpo": ["dpo_loss", "dpo_loss_and_grad"]},
 }  # fmt: skip
 # what no submission needs: the reference, the tests, the grader
 FORBIDDEN_IMPORTS = ("solutions", "_harness", "pytest", "_pytest", "minippo.grade", "minippo.sandbox",

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from conftest import assert_close, numerical_gradient
 
-from minippo import corridor as cd
 from minippo.errors import MinippoError
+from minippo.toys import corridor as cd
 
 GAMMA = cd.GAMMA
 

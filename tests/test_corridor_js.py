@@ -1,5 +1,5 @@
 """The explorer's JavaScript port of the corridor (book/_static/explorer/corridor-math.js), run under Node.js, must
-play the same trajectory as minippo/corridor.py: every number of every tick within 1e-9, every flag equal."""
+play the same trajectory as minippo/toys/corridor.py: every number of every tick within 1e-9, every flag equal."""
 
 import json
 import math
@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from minippo import corridor as cd
+from minippo.toys import corridor as cd
 
 ROOT = Path(__file__).resolve().parents[1]
 MATH_JS = ROOT / "book" / "_static" / "explorer" / "corridor-math.js"

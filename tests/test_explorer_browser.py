@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 from _browser import chromium, serve
 
-from minippo import corridor as cd
+from minippo.toys import corridor as cd
 
 # the first test may build the whole book (the built_book fixture); every wait below has its own, shorter limit
 pytestmark = pytest.mark.timeout(1500)

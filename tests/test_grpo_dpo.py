@@ -5,16 +5,16 @@ import numpy as np
 import pytest
 from conftest import assert_close, numerical_gradient
 
-from minippo import language as lm
 from minippo.distributions import Categorical
-from minippo.dpo import DPOConfig, dpo_loss, dpo_loss_and_grad, response_tokens, sequence_log_probs, train_dpo
-from minippo.grpo import GRPOConfig, group_advantages, grpo_objective, k3, train_grpo
-from minippo.reward_model import make_preferences
-from minippo.rlhf import (
+from minippo.lm import language as lm
+from minippo.lm.dpo import DPOConfig, dpo_loss, dpo_loss_and_grad, response_tokens, sequence_log_probs, train_dpo
+from minippo.lm.grpo import GRPOConfig, group_advantages, grpo_objective, k3, train_grpo
+from minippo.lm.reward_model import make_preferences
+from minippo.lm.rlhf import (
     all_prompts,
-    mean_kl,
     optimal_log_probs,
     pretrained_pieces,
+    response_kl,
     response_log_probs,
     short_response_scores,
     short_responses,
@@ -153,8 +153,8 @@ def test_the_enumerated_responses_are_a_distribution_and_pi_star_closes_the_gap(
         return float(np.mean(np.sum(np.exp(logp) * (scores - beta * (logp - logp_ref)), axis=1)))
 
     assert np.isclose(objective(logp_star), beta * log_z.mean())  # J(π*) = β Ê log Z
-    assert np.isclose(objective(logp_star) - objective(logp_ref), beta * mean_kl(logp_ref, logp_star))
-    assert mean_kl(logp_star, logp_star) == 0.0 and mean_kl(logp_ref, logp_star) > 0.0
+    assert np.isclose(objective(logp_star) - objective(logp_ref), beta * response_kl(logp_ref, logp_star))
+    assert response_kl(logp_star, logp_star) == 0.0 and response_kl(logp_ref, logp_star) > 0.0
 
 
 @pytest.fixture(scope="module")

@@ -21,8 +21,17 @@ def imports_of(path: Path) -> set[str]:
     return names
 
 
+def module_files() -> dict[str, Path]:
+    """Every module of minippo, its subpackages' too, by its dotted name (minippo.lm.rlhf)."""
+    return {
+        ".".join(path.relative_to(ROOT).with_suffix("").parts): path
+        for path in (ROOT / "minippo").rglob("*.py")
+        if path.stem != "__init__"
+    }
+
+
 def test_minippo_has_no_import_cycle_and_imports_no_benchmark():
-    modules = {f"minippo.{path.stem}": path for path in (ROOT / "minippo").glob("*.py") if path.stem != "__init__"}
+    modules = module_files()
     graph = {name: {other for other in imports_of(path) if other in modules} for name, path in modules.items()}
     assert not any(name.startswith("benchmarks") for path in modules.values() for name in imports_of(path))
 
@@ -33,6 +42,21 @@ def test_minippo_has_no_import_cycle_and_imports_no_benchmark():
 
     for name in graph:
         visit(name, [])
+
+
+def test_the_top_level_is_the_rl_library_and_imports_no_room():
+    """The language-model family and the book's toys live in rooms of their own, which the RL core never reaches."""
+    rooms = ("minippo.lm", "minippo.toys")
+
+    def in_a_room(name: str) -> bool:
+        return any(name == room or name.startswith(room + ".") for room in rooms)
+
+    assert any(in_a_room(name) for name in module_files()), "the rooms moved: update this test"
+    for path in (ROOT / "minippo").glob("*.py"):
+        reached = sorted(name for name in imports_of(path) if in_a_room(name))
+        assert reached == [], f"{path.name} imports {reached}"
+    top = {path.stem for path in (ROOT / "minippo").glob("*.py")}
+    assert not top & {"language", "reward_model", "rlhf", "grpo", "dpo", "corridor"}
 
 
 def test_a_cycle_would_be_seen(tmp_path):

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 from conftest import assert_close, numerical_gradient
 
-from minippo import language as lm
-from minippo.reward_model import TASTES, RewardModel, bradley_terry_loss, make_preferences, rater_score
-from minippo.rlhf import (
+from minippo.lm import language as lm
+from minippo.lm.reward_model import TASTES, RewardModel, bradley_terry_loss, make_preferences, rater_score
+from minippo.lm.rlhf import (
     RLHFConfig,
     collect,
     kl_shaped_rewards,

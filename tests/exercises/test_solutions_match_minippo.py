@@ -14,16 +14,16 @@ from minippo import losses
 from minippo.agent import ActorCritic
 from minippo.conv import conv2d_backward, conv2d_forward
 from minippo.distributions import Categorical, DiagGaussian
-from minippo.dpo import dpo_loss
 from minippo.envs import make_env
-from minippo.grpo import group_advantages, grpo_objective
+from minippo.lm.dpo import dpo_loss
+from minippo.lm.grpo import group_advantages, grpo_objective
+from minippo.lm.reward_model import bradley_terry_loss
+from minippo.lm.rlhf import kl_shaped_rewards
 from minippo.network import MLP, linear_backward, tanh_backward
 from minippo.normalization import ObservationNormalizer, RewardScaler
 from minippo.optimizer import Adam
 from minippo.ppo import Config, update_minibatch
 from minippo.ppo import loss_and_grad as minippo_loss_and_grad
-from minippo.reward_model import bradley_terry_loss
-from minippo.rlhf import kl_shaped_rewards
 from minippo.rollout import Rollout
 from solutions import (
     ch01_network,

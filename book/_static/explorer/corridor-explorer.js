@@ -2,7 +2,7 @@
  * The corridor explorer: PPO's Algorithm 1 on the five-state corridor, in the reader's browser.
  *
  * Every <div class="corridor-explorer" data-preset="clip|noclip|hugestep"> on the page becomes an explorer when
- * the page has loaded; a page without one is left alone. The math is minippo/corridor.py, ported line for line
+ * the page has loaded; a page without one is left alone. The math is minippo/toys/corridor.py, ported line for line
  * to corridor-math.js (loaded from beside this file), and a test checks that the two play the same trajectory.
  * This file only draws: the playback speed sets how many ticks are played per second, never what a tick does.
  *

@@ -1,5 +1,5 @@
 /*
- * The corridor toy's math, a line-for-line port of minippo/corridor.py (read that module's docstrings for the
+ * The corridor toy's math, a line-for-line port of minippo/toys/corridor.py (read that module's docstrings for the
  * derivations). The same operations in the same order, so that a test can run both on the same settings and
  * require the trajectories to agree to 1e-9. Like the Python, it computes e^x, log x and cos x from + - * /
  * alone (see the end of the file), so the two agree bit for bit. Plain JavaScript, no dependencies; loads in a
@@ -292,6 +292,7 @@
     return epsilon * epsilon;
   }
 
+  // eq. 8's rule for beta: minippo.losses.adaptive_beta, which the Python corridor uses
   function adaptiveBeta(beta, kl, klTarget) {
     if (kl < klTarget / 1.5) return beta / 2.0;
     if (kl > klTarget * 1.5) return beta * 2.0;

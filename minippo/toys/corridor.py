@@ -40,6 +40,7 @@ from __future__ import annotations
 import math
 
 from minippo.errors import MinippoError
+from minippo.losses import adaptive_beta  # eq. 8's rule for β, in plain float arithmetic
 
 N_STATES = 5
 N_ACTIONS = 2
@@ -316,15 +317,6 @@ def kl_limit(epsilon):
     the region the band describes.
     """
     return epsilon * epsilon
-
-
-def adaptive_beta(beta, kl, kl_target):
-    """Eq. 8's update: β ← β/2 if d < d_targ/1.5, β ← 2β if d > 1.5 d_targ (as in minippo.losses)."""
-    if kl < kl_target / 1.5:
-        return beta / 2.0
-    if kl > kl_target * 1.5:
-        return beta * 2.0
-    return beta
 
 
 # ---------------------------------------------------------------- seeded noise, portable to JavaScript

@@ -10,7 +10,7 @@ Schulman's (2020) "k3" estimator of KL[π_θ ‖ π_ref], unbiased on tokens sam
 
 The objective is L^CLIP's clipped ratio with these advantages, minus β k3, averaged over each response's tokens and
 then over the responses (Shao et al.'s eq. 3). Everything else is minippo's: the language model, the categorical,
-Adam, and the collection of responses of minippo.rlhf.
+Adam, and the collection of responses of minippo.lm.rlhf.
 
 k3's value is unbiased, but its gradient in the loss is not the gradient of that KL: under a ~ π_θ,
 E[(1 − π_ref/π_θ) ∇log π_θ] = −Σ_a π_ref(a) ∇log π_θ(a) = ∇KL[π_ref ‖ π_θ], the forward KL, token by token (Tang &
@@ -30,10 +30,11 @@ import numpy as np
 from minippo import losses
 from minippo.agent import ActorCritic
 from minippo.distributions import Categorical
-from minippo.language import PROMPT_LEN, make_prompts
+from minippo.lm.language import PROMPT_LEN, make_prompts
+from minippo.lm.reward_model import RewardModel
+from minippo.lm.rlhf import collect, sequence_stats
+from minippo.minibatches import minibatch_indices
 from minippo.optimizer import Adam, clip_grad_norm
-from minippo.reward_model import RewardModel
-from minippo.rlhf import collect, copy_model, sequence_stats
 
 
 @dataclass
@@ -120,7 +121,7 @@ def train_grpo(pretrained: ActorCritic, reward_model: RewardModel, config: GRPOC
     """Fine-tune a copy of ``pretrained`` (π_ref, never changed) with GRPO. Its value network is never used.
     ``on_update(stats, policy)`` is called after every iteration. Returns (the fine-tuned model, statistics)."""
     rng = np.random.default_rng(config.seed)
-    agent, reference = copy_model(pretrained), copy_model(pretrained)
+    agent, reference = pretrained.copy(), pretrained.copy()
     policy = agent.nets["policy"]
     optimizer = Adam(policy.params, lr=config.lr)
     history = []
@@ -133,11 +134,8 @@ def train_grpo(pretrained: ActorCritic, reward_model: RewardModel, config: GRPOC
             returns = returns - config.beta * np.where(inside, batch["logp"] - batch["logp_ref"], 0.0).sum(axis=1)
         grouped = returns.reshape(config.prompts, config.group)
         advantages = group_advantages(grouped, normalize_std=config.normalize_std).reshape(-1)
-        n_responses = len(prompts)
         for _ in range(config.epochs):
-            order = rng.permutation(n_responses)
-            for start in range(0, n_responses, config.minibatch_responses):
-                take = order[start : start + config.minibatch_responses]
+            for take in minibatch_indices(len(prompts), config.minibatch_responses, rng):
                 lengths = batch["lengths"][take]
                 valid = np.arange(batch["logp"].shape[1])[None, :] < lengths[:, None]
                 minibatch = {key: batch[key][take][valid] for key in ("obs", "actions", "logp", "logp_ref")}

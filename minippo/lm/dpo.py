@@ -20,10 +20,10 @@ import numpy as np
 
 from minippo.agent import ActorCritic
 from minippo.distributions import Categorical
-from minippo.language import PROMPT_LEN, sequence_features
+from minippo.lm.language import PROMPT_LEN, sequence_features
+from minippo.lm.reward_model import bradley_terry_loss
+from minippo.minibatches import minibatch_indices
 from minippo.optimizer import Adam, clip_grad_norm
-from minippo.reward_model import bradley_terry_loss
-from minippo.rlhf import copy_model
 
 
 @dataclass
@@ -99,7 +99,7 @@ def train_dpo(pretrained: ActorCritic, preferred, rejected, config: DPOConfig, o
     (tokens, lengths) of whole texts sharing their prompt. ``on_epoch(stats, policy)`` after every epoch.
     Returns (the fine-tuned model, one dict per epoch: the mean loss and the implicit reward margin's accuracy)."""
     rng = np.random.default_rng(config.seed)
-    agent, reference = copy_model(pretrained), copy_model(pretrained)
+    agent, reference = pretrained.copy(), pretrained.copy()
     policy = agent.nets["policy"]
     optimizer = Adam(policy.params, lr=config.lr)
     n = len(preferred[1])
@@ -109,9 +109,9 @@ def train_dpo(pretrained: ActorCritic, preferred, rejected, config: DPOConfig, o
     ref_l = sequence_log_probs(reference.nets["policy"], data_l, n)[0]
     history = []
     for epoch in range(1, config.epochs + 1):
-        order, epoch_losses = rng.permutation(n), []
-        for start in range(0, n, config.minibatch_pairs):
-            take = np.sort(order[start : start + config.minibatch_pairs])
+        epoch_losses = []
+        for pairs in minibatch_indices(n, config.minibatch_pairs, rng):
+            take = np.sort(pairs)
             loss = dpo_loss_and_grad(
                 policy, _select(data_w, take), _select(data_l, take), ref_w[take], ref_l[take], config.beta
             )

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from minippo.language import (
+from minippo.lm.language import (
     NEGATIVE,
     NOUNS,
     POSITIVE,

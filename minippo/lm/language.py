@@ -5,7 +5,7 @@ The corpus is short sentences of the form ``the film was very good and new .``: 
 one to three adjectives joined by "and" or "but", each perhaps after "very", all different, then the full stop. The
 language model is minippo's ActorCritic with a discrete head: its "observation" is a fixed description of the prefix
 (the last ``WINDOW`` tokens one-hot, the count of every token so far, and the position), its "action" the next token.
-Its value network is not used until the RL fine-tuning (minippo.rlhf).
+Its value network is not used until the RL fine-tuning (minippo.lm.rlhf).
 
 A prompt is the start of a sentence, its subject (``the film``); a response is what follows it (``was very good .``).
 Pretraining reads whole sentences; the fine-tuning gives the policy a prompt and lets it write the response.

@@ -22,7 +22,7 @@ from minippo import advantages as adv
 from minippo import losses
 from minippo.agent import ActorCritic
 from minippo.distributions import Categorical
-from minippo.language import (
+from minippo.lm.language import (
     BOS,
     EOS,
     MAX_LEN,
@@ -38,9 +38,10 @@ from minippo.language import (
     prefix_features,
     pretrain,
 )
+from minippo.lm.reward_model import RewardModel, make_preferences, rater_score
+from minippo.minibatches import minibatches
 from minippo.optimizer import Adam
 from minippo.ppo import Config, update_minibatch
-from minippo.reward_model import RewardModel, make_preferences, rater_score
 
 
 @dataclass
@@ -98,12 +99,6 @@ def proportional_beta(beta: float, kl: float, kl_target: float, gain: float = 0.
     β moves by at most 2 % per update (with K_β = 0.1), in proportion to how far the KL is from its target."""
     error = float(np.clip((kl - kl_target) / kl_target, -0.2, 0.2))
     return beta * (1.0 + gain * error)
-
-
-def copy_model(model: ActorCritic) -> ActorCritic:
-    twin = ActorCritic(model.obs_dim, model.kind, model.act_dim, model.hidden_sizes, dtype=model.dtype)
-    twin.params[...] = model.params
-    return twin
 
 
 def collect(
@@ -180,7 +175,7 @@ def train_rlhf(pretrained: ActorCritic, reward_model: RewardModel, config: RLHFC
 
     Returns (the fine-tuned model, one dict of statistics per iteration)."""
     rng = np.random.default_rng(config.seed)
-    agent, reference = copy_model(pretrained), copy_model(pretrained)
+    agent, reference = pretrained.copy(), pretrained.copy()
     optimizer = Adam(agent.params, lr=config.lr)
     ppo_config = config.ppo_config()
     beta, history = config.beta, []
@@ -197,12 +192,9 @@ def train_rlhf(pretrained: ActorCritic, reward_model: RewardModel, config: RLHFC
             "advantages": advantages[valid],
             "returns": returns[valid],
         }
-        n = len(data["logp"])
         for _ in range(config.epochs):
-            order = rng.permutation(n)
-            for start in range(0, n, config.minibatch_size):
-                take = order[start : start + config.minibatch_size]
-                update_minibatch(agent, optimizer, {key: value[take] for key, value in data.items()}, ppo_config)
+            for minibatch in minibatches(data, config.minibatch_size, rng):
+                update_minibatch(agent, optimizer, minibatch, ppo_config)
         logp_after = Categorical(agent.policy_output(data["obs"])).log_prob(data["actions"])
         kl = float(np.mean(np.where(valid, batch["logp"] - batch["logp_ref"], 0.0).sum(axis=1)))
         stats = {
@@ -273,7 +265,7 @@ def all_prompts(length: int = 3) -> np.ndarray:
     the corpus draws each word uniformly, so these are equally likely."""
     from itertools import product
 
-    from minippo.language import DETERMINERS, NOUNS, VERBS
+    from minippo.lm.language import DETERMINERS, NOUNS, VERBS
 
     words = list(product(*(DETERMINERS, NOUNS, VERBS)[:length]))
     return np.array([[TOKEN[w] for w in prompt] for prompt in words], dtype=np.int64)
@@ -321,6 +313,7 @@ def optimal_log_probs(logp_ref: np.ndarray, scores: np.ndarray, beta: float):
     return logits - log_z[:, None], log_z
 
 
-def mean_kl(logp: np.ndarray, logq: np.ndarray) -> float:
-    """Ê_x KL[p(·|x) ‖ q(·|x)] = Ê_x Σ_y p(y|x) (log p − log q), over the prompts (rows), exactly."""
+def response_kl(logp: np.ndarray, logq: np.ndarray) -> float:
+    """Ê_x KL[p(·|x) ‖ q(·|x)] = Ê_x Σ_y p(y|x) (log p − log q), exactly: the KL between two distributions over
+    the responses y (columns, as response_log_probs gives them), averaged over the prompts x (rows)."""
     return float(np.mean(np.sum(np.exp(logp) * (logp - logq), axis=1)))
