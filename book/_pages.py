@@ -67,6 +67,7 @@ __all__ = [
     "epochs_on_one_batch",
     "markdown_table",
     "one_batch",
+    "trains_as_now",
     "unchanged_since",
 ]
 
@@ -128,14 +129,53 @@ def unchanged_since(commit: str, paths) -> bool | None:
     (its edits are unknown); None where git or the commit is not at hand (no git, or a shallow clone)."""
     if commit.endswith("+dirty"):
         return False
-    root = Path(__file__).resolve().parent.parent
-
-    def git(*args: str) -> int:
-        return subprocess.run(["git", *args], cwd=root, capture_output=True).returncode
-
     try:
-        if git("cat-file", "-e", f"{commit}^{{commit}}") != 0:
+        if _git("cat-file", "-e", f"{commit}^{{commit}}") != 0:
             return None
     except OSError:
         return None
-    return git("merge-base", "--is-ancestor", commit, "HEAD") == 0 and git("diff", "--quiet", commit, "--", *paths) == 0
+    if _git("merge-base", "--is-ancestor", commit, "HEAD") != 0:
+        return False
+    return _git("diff", "--quiet", commit, "--", *paths) == 0
+
+
+def trains_as_now(commit: str, paths) -> bool | None:
+    """Whether the code of a record made at ``commit`` trains bitwise as the code at hand does: ``paths`` are
+    unchanged since (``unchanged_since``), or changed only in ways that a committed comparison found to compute the
+    same numbers (``proven_same``). For a learning record, not for a speed record (the same numbers may take longer)."""
+    unchanged = unchanged_since(commit, paths)
+    return unchanged if unchanged is not False else (not commit.endswith("+dirty") and proven_same(commit, paths))
+
+
+# The tasks on which a change of the training code must have been compared (python -m benchmarks.same_math) before a
+# record made by the earlier code stands for the later: a discrete, a continuous and an image task, float32 and float64
+SAME_MATH_TASKS = {(task, dtype) for task in ("CartPole-v1", "Hopper-v5", "MinAtar/Breakout-v1")
+                   for dtype in ("float32", "float64")}  # fmt: skip
+
+
+def proven_same(commit: str, paths) -> bool:
+    """Whether ``benchmarks/results/same_math.csv`` holds a comparison, earlier commit E against later commit C, with
+    no difference at all on every update of every task of ``SAME_MATH_TASKS``, such that ``paths`` are the same at
+    ``commit`` as at E (E descends from ``commit``) and the same at C as in this working tree: the record's code and
+    the code at hand then train bitwise the same, though their source differs."""
+    from minippo.records import read_rows
+
+    rows = read_rows(Path(__file__).resolve().parent.parent / "benchmarks" / "results" / "same_math.csv")
+    pairs = {(row["earlier_commit"], row["commit"]) for row in rows}
+    for earlier, later in pairs:
+        compared = [row for row in rows if (row["earlier_commit"], row["commit"]) == (earlier, later)]
+        if {(row["env"], row["dtype"]) for row in compared} < SAME_MATH_TASKS:
+            continue
+        if any(float(row["max_relative_difference"]) != 0 for row in compared) or later.endswith("+dirty"):
+            continue
+        before = _git("merge-base", "--is-ancestor", commit, earlier) == 0
+        before = before and _git("diff", "--quiet", commit, earlier, "--", *paths) == 0
+        after = _git("merge-base", "--is-ancestor", later, "HEAD") == 0
+        after = after and _git("diff", "--quiet", later, "--", *paths) == 0
+        if before and after:
+            return True
+    return False
+
+
+def _git(*args: str) -> int:
+    return subprocess.run(["git", *args], cwd=Path(__file__).resolve().parent.parent, capture_output=True).returncode
