@@ -79,6 +79,8 @@ def _statistic(name: str, values: np.ndarray, level: float | None) -> float:
         return float(np.mean(values > level))
     if name == "last minus first":
         return float(values[-1] - values[0])
+    if name == "last over first":
+        return float(values[-1] / values[0])
     return float({"median": np.median, "min": np.min, "max": np.max, "mean": np.mean}[name](values))
 
 
@@ -89,7 +91,7 @@ class Rule:
     id: str
     variable: str
     window: str  # a key of WINDOWS
-    statistic: str  # median, min, max, mean, last minus first, fraction above (``level``)
+    statistic: str  # median, min, max, mean, last minus first, last over first, fraction above (``level``)
     comparison: str  # > or <
     threshold: float
     causes: tuple[str, ...]  # the likely causes, the likeliest first
@@ -110,18 +112,43 @@ class Rule:
         return math.isfinite(value) and (value > self.threshold if self.comparison == ">" else value < self.threshold)
 
 
-# The rules, the most specific first. PLACEHOLDER thresholds and healthy ranges, from short CartPole runs of the
-# book's setting (20,480 steps, 40 updates; seeds 1-5 healthy, and seeds 1-5 with lr 0.025 and 40 epochs).
+# The rules, the most specific first. Thresholds and healthy ranges are measured: the atlas's record
+# benchmarks/results/atlas_runs.csv (python -m benchmarks.atlas run, at commit cdc9815: 3 seeds of each failure mode on
+# CartPole-v1 and Hopper-v5, healthy runs on those and MinAtar Breakout) and 5 seeds of the book's CartPole setting
+# for 20,480 steps (minippo train CartPole-v1 --steps 20480 --horizon 512 --minibatch-size 128 --epochs 4
+# --entropy-coef 0.01 --no-normalize-observations --no-scale-rewards --no-clip-value-loss --lr 2.5e-4, healthy, and
+# with --lr 0.025 --epochs 40). The healthy range is the statistic over every healthy run, whole and cut to its first
+# 10, 15, 20 and 40 updates; a threshold is the geometric mean of the healthy extreme and the nearest run of the
+# modes it names (all seeds, whole or cut to 40 updates), unless a comment says otherwise.
 RULES = (
-    Rule("policy-never-moves", "approx_kl", "all updates", "max", "<", 1e-9,
-         ("the ratio r_t computed against the current policy instead of θ_old, so the clip never engages",
-          "a step size of 0"), "atlas-ratio", (0.001, 0.003)),
-    Rule("kl-high", "approx_kl", "all updates", "median", ">", 0.01,
+    # the ratio fault logs approx_kl = 0 exactly; a policy collapsed to a deterministic one logs ~1e-13. Healthy
+    # medians: 3.9e-5 at the least (minibatch_whole on CartPole: 4.8e-6); 1e-8 is far below both
+    Rule("policy-frozen", "approx_kl", "all updates", "median", "<", 1e-8,
+         ("the ratio r_t computed against the current policy, not θ_old: r_t = 1 and the clip never engages",
+          "a policy collapsed to a deterministic one after steps far too large (look at its entropy)"),
+         "atlas-ratio", (3.85e-5, 0.0114)),
+    # healthy up to 0.0114 (Hopper, its first 10 updates); epochs_50 on Hopper 0.0157, lr_10x on Hopper 0.031,
+    # α × 100 with K = 40 on CartPole 0.059 (two seeds; the third collapsed), the short CartPole run 0.0245
+    Rule("kl-high", "approx_kl", "all updates", "median", ">", 0.013,
          ("a step size α too large", "too many epochs K over one batch", "minibatches far too small"),
-         "atlas-step-size", (0.00003, 0.0001)),
-    Rule("clip-high", "clip_fraction", "all updates", "median", ">", 0.1,
+         "atlas-step-size", (3.85e-5, 0.0114)),
+    # healthy up to 0.169 (Hopper, first 10 updates); epochs_50 on Hopper 0.228, the short CartPole run 0.227
+    Rule("clip-high", "clip_fraction", "all updates", "median", ">", 0.2,
          ("a step size α too large", "too many epochs K over one batch", "minibatches far too small"),
-         "atlas-step-size", (0.0, 0.0)),
+         "atlas-step-size", (0.0, 0.169)),
+    # the last update's value loss over the first's: healthy up to 2.23 (CartPole, 10 updates); value_loss_sign 3.23
+    # on CartPole at 40 updates (6.1 at 150), 280 on Hopper
+    Rule("value-loss-grows", "value_loss", "all updates", "last over first", ">", 2.7,
+         ("the value loss added with the wrong sign: the critic ascends its squared error",
+          "returns growing faster than the critic follows (rewards not scaled, γ = 1)"),
+         "atlas-value-loss", (0.0031, 2.23)),
+    # healthy at least 0.0027 (CartPole: its critic learns slowly in the book's setting); value_loss_sign on Hopper
+    # -4.8 or below, stale_value_targets on Hopper -0.87 and -1.1 (2 seeds of 3). Not the geometric mean: the
+    # threshold is set at -1, below every healthy run by a whole unit. A run that solves CartPole (every return 500)
+    # has returns of no variance, where explained variance means nothing
+    Rule("critic-worse-than-constant", "explained_variance", "all updates", "median", "<", -1.0,
+         ("the value loss added with the wrong sign", "value targets computed once and never refreshed (stale)"),
+         "atlas-value-loss", (0.0027, 0.99)),
 )  # fmt: skip
 
 
