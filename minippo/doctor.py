@@ -16,7 +16,7 @@ rollout/ep_rew_mean             return_mean          the same: the mean of the l
 rollout/ep_len_mean             length_mean          the same
 train/approx_kl                 approx_kl            both Ê[(r − 1) − log r]; SB3's is the mean over the minibatches of
                                                      the last epoch, each before its step; minippo's is over the whole
-                                                     batch after the update (so minippo's is the larger)
+                                                     batch after the update (so minippo's is usually larger)
 train/clip_fraction             clip_fraction        SB3's: the mean over the minibatches of every epoch, during
                                                      training; minippo's: over the whole batch after the update
 −train/entropy_loss             entropy              SB3 logs −entropy, averaged over the minibatches during training;
@@ -31,6 +31,7 @@ train/learning_rate             lr                   the same
 from __future__ import annotations
 
 import csv
+import json
 import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -66,7 +67,7 @@ SB3 = {  # minippo's name: (SB3's column, the factor that turns SB3's value into
     "explained_variance": ("train/explained_variance", 1.0),
     "lr": ("train/learning_rate", 1.0),
 }
-ROLLOUT_COLUMNS = ("step", "return_mean", "length_mean")  # of an SB3 row's own rollout, not of the update before
+ROLLOUT_COLUMNS = ("return_mean", "length_mean")  # of an SB3 row's own rollout, not of the update before
 WINDOWS = {  # a window's name: the (first, last + 1) indices of the rows it reads, for a run of n updates
     "all updates": lambda n: (0, n),
     "updates 1-10": lambda n: (0, MIN_UPDATES),
@@ -205,8 +206,11 @@ def read_run(folder) -> tuple[str, list[dict]]:
     if "time/iterations" in header and any(column.startswith("train/") for column in header):
         rows = []
         for i in range(1, len(table)):  # row i holds the train/ columns of update (its iteration − 1)
-            update = _number(table[i]["time/iterations"], f"{path}, line {i + 2}, time/iterations") - 1
-            rollout = table[i - 1] if table[i - 1]["time/iterations"] == f"{update:g}" else {}  # log_interval 1
+            iteration, before = (_number(table[j]["time/iterations"], f"{path}, line {j + 2}") for j in (i, i - 1))
+            if math.isnan(iteration):
+                raise MinippoError(f"{path}, line {i + 2}: no time/iterations")
+            update = iteration - 1
+            rollout = table[i - 1] if before == update else {}  # its rollout's row, when every iteration is logged
             row = {"update": update, "step": _number(rollout.get("time/total_timesteps"), f"{path}, line {i + 1}")}
             for name, (column, factor) in SB3.items():
                 source = rollout if name in ROLLOUT_COLUMNS else table[i]
@@ -237,7 +241,6 @@ def report(folder, as_json: bool = False) -> tuple[str, int]:
     findings = diagnose(rows)
     measured = [(rule, *rule.measure(rows)) for rule in RULES]
     if as_json:
-        import json
 
         def described(rule, value, first, last):
             return {**asdict(rule), "value": value, "updates": [first, last], "found": rule.holds(value),
@@ -249,7 +252,7 @@ def report(folder, as_json: bool = False) -> tuple[str, int]:
         return text, int(bool(findings))
     head = f"{folder}: {'minippo' if kind == 'minippo' else 'Stable-Baselines3'} progress.csv, {len(rows)} updates"
     if kind == "sb3":
-        head += " (SB3's approx_kl and clip_fraction are measured during training: smaller than minippo's)"
+        head += " (SB3's approx_kl and clip_fraction are measured during training: usually smaller)"
     lines = [head]
     if findings:
         lines += [f"{len(findings)} failure signature{'s' * (len(findings) > 1)} found:"]
