@@ -113,17 +113,22 @@ class Rule:
         return math.isfinite(value) and (value > self.threshold if self.comparison == ">" else value < self.threshold)
 
 
-# The rules, the most specific first. Thresholds and healthy ranges are measured: the atlas's record
-# benchmarks/results/atlas_runs.csv (python -m benchmarks.atlas run, at commit cdc9815: 3 seeds of each failure mode on
-# CartPole-v1 and Hopper-v5, healthy runs on those and MinAtar Breakout) and 5 seeds of the book's CartPole setting
-# for 20,480 steps (minippo train CartPole-v1 --steps 20480 --horizon 512 --minibatch-size 128 --epochs 4
-# --entropy-coef 0.01 --no-normalize-observations --no-scale-rewards --no-clip-value-loss --lr 2.5e-4, healthy, and
-# with --lr 0.025 --epochs 40). The healthy range is the statistic over every healthy run, whole and cut to its first
-# 10, 15, 20 and 40 updates; a threshold is the geometric mean of the healthy extreme and the nearest run of the
-# modes it names (all seeds, whole or cut to 40 updates), unless a comment says otherwise.
+# The rules, the most specific first. Thresholds and healthy ranges are measured on the atlas's record
+# benchmarks/results/atlas_runs.csv (python -m benchmarks.atlas run, code at commit cdc9815; read while the campaign
+# ran, with 3 seeds of healthy, lr_10x, lr_100x_epochs_40, epochs_50, minibatch_whole, minibatch_4,
+# no_advantage_normalization, value_loss_sign, stale_value_targets, entropy_wrong_sign, entropy_too_large on
+# CartPole-v1 and Hopper-v5, and healthy MinAtar Breakout) and on 5 seeds of the book's CartPole setting for 20,480
+# steps (minippo train CartPole-v1 --steps 20480 --horizon 512 --minibatch-size 128 --epochs 4 --entropy-coef 0.01
+# --no-normalize-observations --no-scale-rewards --no-clip-value-loss --lr 2.5e-4, and with --lr 0.025 --epochs 40).
+# A healthy range is the statistic over every healthy run, whole and cut to its first 10, 15, 20 and 40 updates; a
+# threshold is the geometric mean of the healthy extreme and the nearest run of the modes it names (every seed, whole
+# or cut to 40 updates) unless its comment says otherwise. No rule separates the entropy bonus's sign or size, or
+# advantages left unnormalised, from healthy runs in that record; the bootstrapping, normalisation, log-density and
+# γ = 1 modes were not yet recorded.
 RULES = (
-    # the ratio fault logs approx_kl = 0 exactly; a policy collapsed to a deterministic one logs ~1e-13. Healthy
-    # medians: 3.9e-5 at the least (minibatch_whole on CartPole: 4.8e-6); 1e-8 is far below both
+    # the ratio fault logs approx_kl = 0 exactly (the atlas's tests/test_atlas.py, commit aadcb29; its runs were not yet
+    # recorded); α × 100, K = 40 on CartPole seed 1 collapsed to a deterministic policy: median 1.6e-13 over 40
+    # updates. Healthy medians 3.9e-5 at the least (minibatch_whole on CartPole 4.8e-6): 1e-8 is far below them all
     Rule("policy-frozen", "approx_kl", "all updates", "median", "<", 1e-8,
          ("the ratio r_t computed against the current policy, not θ_old: r_t = 1 and the clip never engages",
           "a policy collapsed to a deterministic one after steps far too large (look at its entropy)"),
