@@ -320,6 +320,14 @@ def cmd_grade(args) -> int:
     )
 
 
+def cmd_doctor(args) -> int:
+    from minippo.doctor import report
+
+    text, status = report(args.run, as_json=args.json)
+    print(text)
+    return status
+
+
 def build_parser() -> Parser:
     parser = Parser(prog="minippo", description="PPO in NumPy, with hand-derived gradients.")
     sub = parser.add_subparsers(dest="command", parser_class=Parser)
@@ -408,6 +416,18 @@ def build_parser() -> Parser:
     p.add_argument("--repo", help="with --autograder-zip: the course repository's address, for setup.sh")
     p.add_argument("--commit", help="with --autograder-zip: the commit setup.sh installs")
     p.set_defaults(func=cmd_grade)
+
+    p = sub.add_parser(
+        "doctor",
+        help="name the failure signatures in a run's progress.csv",
+        description="Read RUN/progress.csv (minippo's, or Stable-Baselines3's CSV logger's; CleanRL logs to "
+        "TensorBoard, so export its scalars first) and report each failure signature its debug variables show: what "
+        "was seen against the healthy range, the likely causes in order, and the section of the book to read. Exit "
+        "status: 0 when none is found, 1 when one is, 2 on bad input.",
+    )
+    p.add_argument("run", help="a run folder holding progress.csv")
+    p.add_argument("--json", action="store_true", help="the report as JSON")
+    p.set_defaults(func=cmd_doctor)
     return parser
 
 

@@ -1,0 +1,151 @@
+"""minippo doctor: the broken CartPole run is named, healthy runs are not, SB3's log is read, bad input exits 2."""
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+
+from minippo.cli import main
+from minippo.config import Config
+from minippo.doctor import ANCHORS, MIN_UPDATES, RULES, WINDOWS, Rule, diagnose, read_run
+from minippo.errors import MinippoError
+from minippo.ppo import train
+from minippo.presets import CARTPOLE_PPO
+from minippo.records import write_rows
+from minippo.run_folder import PROGRESS_FIELDS
+
+SB3_RUN = Path(__file__).resolve().parent / "data" / "sb3_cartpole"  # made by tests/data/make_sb3_log.py
+STEP_SIZE_CAUSES = ("step size", "epochs")
+
+
+def cartpole(folder: Path, seed: int, **changes) -> Path:
+    """The book's CartPole setting for 20,480 steps (40 updates of 512), with ``changes``; its run folder."""
+    train(Config(**{**CARTPOLE_PPO, **changes}, total_steps=20480, seed=seed), folder)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def broken_run(tmp_path_factory):  # a step size 100× the book's (2.5e-4) and 40 epochs on each batch
+    return cartpole(tmp_path_factory.mktemp("broken"), seed=1, lr=0.025, epochs=40)
+
+
+def progress(folder: Path, rows: list[dict]) -> Path:
+    """A minippo progress.csv of ``rows`` (the unnamed columns 0) in ``folder``."""
+    folder.mkdir(exist_ok=True)
+    write_rows(folder / "progress.csv", PROGRESS_FIELDS, [{key: row.get(key, 0) for key in PROGRESS_FIELDS}
+                                                          for row in rows])  # fmt: skip
+    return folder
+
+
+def steady(n: int, **values) -> list[dict]:
+    """n updates of a run whose debug variables sit in the healthy ranges, with ``values`` (a number or a list)."""
+    base = dict(approx_kl=0.003, clip_fraction=0.05, entropy=0.6, value_loss=20.0, explained_variance=0.5)
+    rows = [{"update": i + 1, "step": 512 * (i + 1), "return_mean": 20.0 + i, **base} for i in range(n)]
+    for key, value in values.items():
+        for i, row in enumerate(rows):
+            row[key] = value[i] if isinstance(value, list) else value
+    return rows
+
+
+def test_the_rule_table_is_well_formed():
+    assert len({rule.id for rule in RULES}) == len(RULES)
+    for rule in RULES:
+        assert rule.window in WINDOWS and rule.anchor in ANCHORS and rule.comparison in "<>" and rule.causes
+        assert (rule.level is not None) == (rule.statistic == "fraction above")
+        assert not rule.holds(rule.healthy[0]) and not rule.holds(rule.healthy[1]), rule.id
+
+
+def test_the_evaluator_reads_the_window_and_the_statistic():
+    rows = steady(40, approx_kl=[0.0] * 30 + [0.5] * 10)
+    late = Rule("late", "approx_kl", "the last quarter", "min", ">", 0.1, ("x",), "atlas-step-size", (0, 0.1))
+    early = Rule("early", "approx_kl", "updates 1-10", "max", ">", 0.1, ("x",), "atlas-step-size", (0, 0.1))
+    share = Rule("share", "approx_kl", "all updates", "fraction above", ">", 0.2, ("x",), "atlas-step-size",
+                 (0, 0.1), level=0.1)  # fmt: skip
+    found = diagnose(rows, rules=(late, early, share))
+    assert [f.rule.id for f in found] == ["late", "share"]
+    assert (found[0].first_update, found[0].last_update, found[0].value) == (31, 40, 0.5)
+    assert found[1].value == pytest.approx(0.25)
+
+
+def test_the_broken_cartpole_run_names_the_step_size_or_the_epochs_first(broken_run, capsys):
+    kind, rows = read_run(broken_run)
+    assert kind == "minippo" and len(rows) == 40
+    findings = diagnose(rows)
+    assert findings and any(word in findings[0].rule.causes[0] for word in STEP_SIZE_CAUSES)
+    assert main(["doctor", str(broken_run)]) == 1
+    out = capsys.readouterr().out
+    assert findings[0].rule.causes[0] in out and f"#{findings[0].rule.anchor}" in out
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_healthy_short_cartpole_runs_raise_no_alarm(tmp_path, seed, capsys):
+    run = cartpole(tmp_path / "healthy", seed)
+    assert diagnose(read_run(run)[1]) == []
+    assert main(["doctor", str(run)]) == 0
+    out = capsys.readouterr().out
+    assert "no failure signature found in 40 updates" in out and "healthy runs:" in out
+
+
+def test_a_stable_baselines3_log_is_read_in_minippos_names_and_units():
+    kind, rows = read_run(SB3_RUN)
+    assert kind == "sb3" and len(rows) == 19  # 20 iterations logged; the last one's update was never logged
+    assert [row["update"] for row in rows] == list(range(1, 20))
+    assert [row["step"] for row in rows] == [256 * i for i in range(1, 20)]
+    import csv
+
+    with open(SB3_RUN / "progress.csv", newline="") as handle:
+        table = list(csv.DictReader(handle))
+    assert rows[0]["entropy"] == pytest.approx(-float(table[1]["train/entropy_loss"]))  # update 1: logged in row 2
+    assert rows[0]["value_loss"] == pytest.approx(float(table[1]["train/value_loss"]) / 2)
+    assert rows[0]["return_mean"] == pytest.approx(float(table[0]["rollout/ep_rew_mean"]))  # its own rollout's
+    assert 0.6 < rows[0]["entropy"] < math.log(2) + 1e-6
+
+
+def test_the_doctor_reads_a_stable_baselines3_log_from_the_command_line(capsys):
+    assert main(["doctor", str(SB3_RUN), "--json"]) in (0, 1)
+    report = json.loads(capsys.readouterr().out)
+    assert report["format"] == "sb3" and report["updates"] == 19
+    assert {check["id"] for check in report["checked"]} == {rule.id for rule in RULES}
+
+
+def test_json_names_each_finding_with_its_section(tmp_path, capsys):
+    run = progress(tmp_path / "run", steady(40, approx_kl=0.0))  # a policy whose logged KL is exactly 0
+    assert main(["doctor", str(run), "--json"]) == 1
+    report = json.loads(capsys.readouterr().out)
+    first = report["findings"][0]
+    assert first["variable"] == "approx_kl" and first["read"].endswith("#" + first["anchor"])
+
+
+def bad_inputs(tmp_path: Path) -> dict:
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "garbage").mkdir()
+    (tmp_path / "garbage" / "progress.csv").write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00\xff\xfe")
+    (tmp_path / "zero").mkdir()
+    (tmp_path / "zero" / "progress.csv").write_text("")
+    (tmp_path / "unknown").mkdir()
+    (tmp_path / "unknown" / "progress.csv").write_text("epoch,loss,accuracy\n1,0.5,0.9\n")
+    (tmp_path / "words").mkdir()
+    write_rows(tmp_path / "words" / "progress.csv", PROGRESS_FIELDS, [dict.fromkeys(PROGRESS_FIELDS, "many")])
+    progress(tmp_path / "short", steady(MIN_UPDATES - 1))
+    return {
+        "missing": ("no run folder",),
+        "empty": ("has no progress.csv", "TensorBoard"),
+        "garbage": ("cannot read",),
+        "zero": ("is empty",),
+        "unknown": ("none of the columns",),
+        "words": ("'many' is not a number",),
+        "short": (f"{MIN_UPDATES - 1} updates are too few", f"at least {MIN_UPDATES}"),
+    }
+
+
+@pytest.mark.parametrize("name", ["missing", "empty", "garbage", "zero", "unknown", "words", "short"])
+def test_bad_input_exits_2_with_one_line(tmp_path, name, capsys):
+    fragments = bad_inputs(tmp_path)[name]
+    with pytest.raises(MinippoError):
+        diagnose(read_run(tmp_path / name)[1])
+    assert main(["doctor", str(tmp_path / name)]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert captured.out == "" and len(lines) == 1 and lines[0].startswith("minippo: error: "), captured
+    assert all(fragment in lines[0] for fragment in fragments), lines[0]
