@@ -138,3 +138,20 @@ def test_the_plan_leaves_out_what_does_not_apply():
     assert not any(mode == "log_prob_wrong_axis" and task == "CartPole-v1" for mode, task, _ in runs)
     assert not any(mode != "healthy" and task.startswith("MinAtar") for mode, task, _ in runs)
     assert len(runs) == len(set(runs))
+
+
+def test_the_signature_rule_finds_the_variable_that_moved():
+    rng = np.random.default_rng(0)
+
+    def run(kl):
+        n = 20
+        row = {name: 1.0 + 0.01 * rng.random(n) for name in atlas.VARIABLES}
+        row["approx_kl"] = kl * (1.0 + 0.1 * rng.random(n))
+        row["return_mean"] = np.linspace(10.0, 100.0, n)
+        return row
+
+    runs = {("healthy", task, seed): run(0.01) for task in atlas.TASKS for seed in atlas.SEEDS}
+    runs |= {("lr_10x", "Hopper-v5", seed): run(1.0) for seed in atlas.SEEDS}
+    (rule,) = atlas.signature_rules(runs)
+    assert rule["rule"].split()[0].startswith("kl_") and rule["rule"].split()[1] == ">"
+    assert rule["seeds_holding"] == "3/3" and rule["healthy_false_alarms"] == "0/9" and rule["verdict"] == "separated"
