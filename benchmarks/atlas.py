@@ -1,0 +1,590 @@
+"""The atlas of how PPO fails: faults injected into minippo from outside, the runs they make, and their signatures.
+
+    python -m benchmarks.atlas run                 # every (mode, task, seed) not yet recorded, one after the other
+    python -m benchmarks.atlas run --tasks CartPole-v1 --modes healthy lr_10x --seeds 1
+    python -m benchmarks.atlas summarize           # healthy ranges and one signature rule per (mode, task), as tables
+    python -m benchmarks.atlas list                # the modes, each with what it injects, its cause and its fix
+
+A fault is a change of Config fields (``dataclasses.replace``), or a function of minippo replaced for the length of a
+``with fault.injected():`` block and put back after it; the library itself has no switch for any of them. Records:
+``results/atlas_runs.csv`` (every update of every run: mode, task, seed, then progress.csv's columns) and
+``results/atlas_runs.json`` (the commands, the commit, the date, each mode's description, each run's outcome).
+``summarize`` writes ``results/atlas_healthy_ranges.csv``, ``results/atlas_signatures.csv``, the features of every run
+(``results/atlas_features.csv``) and what each feature reads (``results/atlas_feature_legend.csv``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import datetime
+import json
+import sys
+import time
+from collections.abc import Callable
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+import minippo.losses
+import minippo.ppo
+from benchmarks import common
+from minippo.distributions import DiagGaussian
+from minippo.errors import NonFiniteError
+from minippo.presets import ATARI, CARTPOLE_PPO
+from minippo.records import read_rows
+from minippo.rollout import Rollout
+
+RUNS_CSV = common.RESULTS / "atlas_runs.csv"
+RUNS_JSON = common.RESULTS / "atlas_runs.json"
+RANGES_CSV = common.RESULTS / "atlas_healthy_ranges.csv"
+SIGNATURES_CSV = common.RESULTS / "atlas_signatures.csv"
+RUN_FOLDERS = Path("/tmp/atlas_runs")  # progress.csv, config.json and checkpoints of each run, outside the repository
+SEEDS = (1, 2, 3)
+
+# the tasks: the book's CartPole PPO setting, the paper's Hopper setting (Config's defaults), and the paper's Atari
+# setting on a MinAtar game (healthy runs only); each with the number of updates of a run
+TASKS = {
+    "CartPole-v1": (dict(CARTPOLE_PPO), 150),
+    "Hopper-v5": (dict(env_id="Hopper-v5"), 60),
+    "MinAtar/Breakout-v1": (dict(ATARI, env_id="MinAtar/Breakout-v1"), 200),
+}
+FAULT_TASKS = ("CartPole-v1", "Hopper-v5")
+
+
+def task_config(task: str, seed: int):
+    settings, updates = TASKS[task]
+    config = minippo.ppo.Config(**settings, seed=seed)
+    return dataclasses.replace(config, total_steps=updates * config.batch_size)
+
+
+# ---- injecting: functions of minippo replaced where they are looked up, and put back
+
+
+@contextmanager
+def replaced(*replacements):
+    """For each (owner, name, make): ``owner.name`` becomes ``make(original)`` inside the block, in ``owner`` (a module
+    or a class) and in every loaded minippo module that imported the same object by name; all are restored on exit."""
+    saved = []
+    try:
+        for owner, name, make in replacements:
+            original = getattr(owner, name)
+            new = make(original)
+            holders = [owner]
+            if not isinstance(owner, type):
+                holders += [
+                    module
+                    for key, module in list(sys.modules.items())
+                    if key.split(".")[0] == "minippo"
+                    and module is not owner
+                    and getattr(module, name, None) is original
+                ]
+            for holder in holders:
+                saved.append((holder, name, original))
+                setattr(holder, name, new)
+        yield
+    finally:
+        for holder, name, original in reversed(saved):
+            setattr(holder, name, original)
+
+
+def value_gradient_flipped(original):
+    def value_loss(*args, **kwargs):
+        loss, grad = original(*args, **kwargs)
+        return loss, -grad  # the critic climbs its own error; the logged value loss is still the true one
+
+    return value_loss
+
+
+class _StaleCritic:
+    """The live agent in every respect but V, which is a frozen copy's."""
+
+    def __init__(self, live, frozen):
+        self._live, self._frozen = live, frozen
+
+    def __getattr__(self, name):
+        return getattr(self._live, name)
+
+    def value(self, obs):
+        return self._frozen.value(obs)
+
+
+def critic_frozen_at_start(original):
+    frozen = {}  # the critic as it was at the first rollout, one per agent
+
+    def collect(self):
+        live = self.agent
+        critic = frozen.setdefault(id(live), live.copy())
+        self.agent = _StaleCritic(live, critic)
+        try:
+            return original(self)
+        finally:
+            self.agent = live
+
+    return collect
+
+
+def episode_ends_changed(terminal_as_truncation: bool):
+    def make(original):
+        def compute_advantages(batch, config):
+            ends = batch.terminated | batch.truncated
+            if terminal_as_truncation:  # bootstraps a fall from V of the next episode's first observation
+                batch = dataclasses.replace(batch, terminated=np.zeros_like(ends), truncated=ends)
+            else:  # a time limit counted as a terminal state: V = 0 after it
+                batch = dataclasses.replace(batch, terminated=ends, truncated=np.zeros_like(ends))
+            return original(batch, config)
+
+        return compute_advantages
+
+    return make
+
+
+def against_current_policy(original):
+    def with_current(logp, logp_old, *rest):
+        return original(logp, logp, *rest)  # r_t = π_θ / π_θ = 1, though its gradient is still ∇ log π_θ
+
+    return with_current
+
+
+def old_policy_is_current(original):
+    def old_policy(agent, data):
+        return agent.distribution(agent.policy_output(data["obs"]))
+
+    return old_policy
+
+
+def log_prob_over_samples(original):
+    def log_prob(self, actions):
+        per_sample = original(self, actions)
+        return np.full_like(per_sample, per_sample.mean())  # Σ over the samples (÷ n): every sample gets the same
+
+    return log_prob
+
+
+def log_prob_backward_over_samples(original):
+    def log_prob_backward(self, actions, grad_logp):
+        # log π'_i = (1/n) Σ_j log π_j for every i, so ∂L/∂ log π_j = Σ_i ∂L/∂ log π'_i / n
+        return original(self, actions, np.full_like(grad_logp, grad_logp.sum() / len(grad_logp)))
+
+    return log_prob_backward
+
+
+# ---- the modes
+
+
+@dataclass(frozen=True)
+class Fault:
+    name: str
+    injected: str  # what the lab changes
+    cause: str  # the bug or the bad setting, in words
+    fix: str
+    changes: Callable = lambda config: {}  # Config fields to change, from the task's Config
+    patches: tuple = ()  # (owner, name, make) for ``replaced``
+    not_applicable: dict = field(default_factory=dict)  # task: why the mode does not apply there
+
+    def configure(self, config):
+        return dataclasses.replace(config, **self.changes(config)).validate()
+
+    def injected_into(self):
+        return replaced(*self.patches)
+
+
+def _losses(*names):
+    return tuple((minippo.losses, name, against_current_policy) for name in names)
+
+
+NOT_SET_ON_CARTPOLE = "the book's CartPole setting already has it off: the healthy CartPole run is this run"
+FAULTS = {
+    fault.name: fault
+    for fault in [
+        Fault("healthy", "nothing", "", ""),
+        Fault("lr_10x", "Adam's step size α × 10", "a step size ten times too large", "α back to the task's value",
+              lambda c: {"lr": 10 * c.lr}),
+        Fault("lr_100x_epochs_40", "α × 100 and K = 40 epochs (CartPole only)",
+              "a step size a hundred times too large, with far too many epochs on one batch",
+              "α and K back to the task's values", lambda c: {"lr": 100 * c.lr, "epochs": 40},
+              not_applicable={"Hopper-v5": "the doctor's test case is made on CartPole only"}),
+        Fault("epochs_50", "K = 50 epochs", "far too many passes over one batch: the policy walks far from θ_old",
+              "K back to 3–10", lambda c: {"epochs": 50}),
+        Fault("minibatch_whole", "M = N·T (one minibatch: the whole batch)",
+              "one Adam step per epoch: K steps per batch, too few to learn", "M back to 64–256",
+              lambda c: {"minibatch_size": c.batch_size}),
+        Fault("minibatch_4", "M = 4", "minibatches so small that every step is noise, and many more steps per batch",
+              "M back to 64–256", lambda c: {"minibatch_size": 4}),
+        Fault("no_advantage_normalization", "normalize_advantages = False",
+              "advantages on the scale of the returns: the step size of the policy moves with the reward scale",
+              "normalise Â per minibatch", lambda c: {"normalize_advantages": False}),
+        Fault("value_loss_sign", "losses.value_loss returns −∂L^VF/∂V (its logged value unchanged)",
+              "the value loss added with the wrong sign: the critic ascends its squared error",
+              "total loss −L^CLIP + c1 L^VF − c2 S (eq. 9)",
+              patches=((minippo.losses, "value_loss", value_gradient_flipped),)),
+        Fault("stale_value_targets", "Rollout.collect takes V(s_t), V(s_{t+1}) from a copy of the critic frozen at the "
+              "first update (the batch's stored values, the advantages and the targets)",
+              "value estimates computed once and never refreshed: Â and V^targ are built on the initial critic",
+              "compute V with the current critic for every new batch",
+              patches=((Rollout, "collect", critic_frozen_at_start),)),
+        Fault("entropy_wrong_sign", "c2 = −0.01 (CartPole's bonus negated; Hopper has none, so −0.01 as on CartPole)",
+              "the entropy bonus subtracted from the objective: the policy is pushed to be certain",
+              "loss −= c2 S with c2 ≥ 0", lambda c: {"entropy_coef": -(c.entropy_coef or 0.01)}),
+        Fault("entropy_too_large", "c2 = 0.5", "an entropy bonus that outweighs the advantage term",
+              "c2 = 0 to 0.01", lambda c: {"entropy_coef": 0.5}),
+        Fault("bootstrap_at_termination", "compute_advantages sees every termination as a truncation",
+              "terminated ignored: a fall is bootstrapped with γV of the next state the batch holds (the next "
+              "episode's first), so falling costs nothing", "V(s_{t+1}) = 0 after a termination",
+              patches=((minippo.ppo, "compute_advantages", episode_ends_changed(terminal_as_truncation=True)),)),
+        Fault("no_bootstrap_at_truncation", "compute_advantages sees every time-limit truncation as a termination",
+              "a time limit treated as a terminal state: V = 0 where the episode would have gone on",
+              "bootstrap with V(final observation) when truncated",
+              patches=((minippo.ppo, "compute_advantages", episode_ends_changed(terminal_as_truncation=False)),)),
+        Fault("no_observation_normalization", "normalize_observations = False",
+              "raw observations of very different scales fed to a tanh network", "running mean/std normalisation",
+              lambda c: {"normalize_observations": False}, not_applicable={"CartPole-v1": NOT_SET_ON_CARTPOLE}),
+        Fault("no_reward_scaling", "scale_rewards = False",
+              "returns in the hundreds or thousands for a critic that starts near 0", "divide r by the std of G",
+              lambda c: {"scale_rewards": False}, not_applicable={"CartPole-v1": NOT_SET_ON_CARTPOLE}),
+        Fault("ratio_vs_current_policy", "losses.clip_objective, approx_kl, clip_fraction and ppo.old_policy read "
+              "the current policy where they should read θ_old",
+              "log π_θold recomputed from the current θ: r_t = 1, the clip never engages, K epochs of plain policy "
+              "gradient; the logged KL and clip fraction are 0", "store log π_θold(a_t|s_t) at the rollout and use it",
+              patches=(*_losses("clip_objective", "approx_kl", "clip_fraction"),
+                       (minippo.ppo, "old_policy", old_policy_is_current))),
+        Fault("log_prob_wrong_axis", "DiagGaussian.log_prob (and its backward) reduce over the samples, axis 0, not "
+              "over the action components: every sample gets the batch's mean log-probability",
+              "the Gaussian log-density summed over the wrong axis", "sum over the last axis (the action components)",
+              patches=((DiagGaussian, "log_prob", log_prob_over_samples),
+                       (DiagGaussian, "log_prob_backward", log_prob_backward_over_samples)),
+              not_applicable={"CartPole-v1": "CartPole's policy is categorical: there is no Gaussian"}),
+        Fault("gamma_1", "γ = 1", "no discount on a long task: returns and their variance grow with the episode",
+              "γ = 0.99", lambda c: {"gamma": 1.0}),
+    ]
+}  # fmt: skip
+
+
+def planned_runs(modes, tasks, seeds) -> list[tuple[str, str, int]]:
+    runs = []
+    for mode in modes:
+        for task in tasks:
+            healthy_only = task not in FAULT_TASKS
+            if (mode != "healthy" and healthy_only) or task in FAULTS[mode].not_applicable:
+                continue
+            runs += [(mode, task, seed) for seed in seeds]
+    return runs
+
+
+def train_one(mode: str, task: str, seed: int, out: Path | None = None) -> tuple[list[dict], str]:
+    """The progress rows of one run with ``mode`` injected, and its outcome: ok, or where it stopped."""
+    fault = FAULTS[mode]
+    config = fault.configure(task_config(task, seed))
+    rows = []
+    with fault.injected_into():
+        try:
+            minippo.ppo.train(config, out=out, on_update=rows.append)
+        except NonFiniteError as error:
+            return rows, f"stopped: {error}"
+    return rows, "ok"
+
+
+# ---- the record
+
+
+def load_record() -> dict:
+    if RUNS_JSON.exists():
+        return json.loads(RUNS_JSON.read_text())
+    return {"commands": [], "commit": None, "date": None, "tasks": {}, "modes": {}, "runs": []}
+
+
+def describe(record: dict) -> None:
+    record["tasks"] = {
+        task: {
+            "updates": updates,
+            "config": {k: v for k, v in dataclasses.asdict(task_config(task, 1)).items() if k != "seed"},
+        }
+        for task, (_, updates) in TASKS.items()
+    }
+    record["modes"] = {
+        name: {"injected": f.injected, "cause": f.cause, "fix": f.fix, "not_applicable": f.not_applicable}
+        for name, f in FAULTS.items()
+    }
+
+
+def record_runs(modes, tasks, seeds, argv) -> int:
+    record = load_record()
+    commit = common.git_commit(("minippo", "benchmarks/atlas.py"))
+    if record["commit"] not in (None, commit):
+        common.fail(f"{common.relative(RUNS_JSON)} holds runs of commit {record['commit']}, not {commit}")
+    record.update(commit=commit, date=datetime.date.today().isoformat())
+    command = common.invocation("atlas", argv)
+    if command not in record["commands"]:
+        record["commands"].append(command)
+    describe(record)
+    done = {(run["mode"], run["task"], run["seed"]) for run in record["runs"]}
+    left = [run for run in planned_runs(modes, tasks, seeds) if run not in done]
+    print(f"{len(left)} runs to make, {len(done)} recorded", flush=True)
+    for mode, task, seed in left:
+        started = time.perf_counter()
+        folder = RUN_FOLDERS / f"{mode}-{task.replace('/', '-')}-seed{seed}"
+        rows, outcome = train_one(mode, task, seed, folder)
+        wall = time.perf_counter() - started
+        labels = {"mode": mode, "task": task, "seed": seed}
+        fields = list(labels) + list(rows[0] if rows else minippo.ppo.PROGRESS_FIELDS)
+        old = read_rows(RUNS_CSV) if RUNS_CSV.exists() else []
+        new = [{**labels, **{k: _short(v) for k, v in row.items()}} for row in rows]
+        common.write_rows(RUNS_CSV, old + new, fields)
+        last = rows[-1]["return_mean"] if rows else float("nan")
+        record["runs"].append({**labels, "updates": len(rows), "outcome": outcome, "final_return_mean": _short(last),
+                               "wall_s": round(wall, 1)})  # fmt: skip
+        RUNS_JSON.write_text(json.dumps(record, indent=1, ensure_ascii=False) + "\n")
+        print(f"{mode:28} {task:20} seed {seed}  {len(rows):3} updates  return {last:8.1f}  {wall:5.0f} s  {outcome}",
+              flush=True)  # fmt: skip
+    return 0
+
+
+def _short(value):
+    return value if isinstance(value, int) else float(f"{value:.6g}")
+
+
+# ---- the analysis: what each run's debug variables show, and a rule per mode
+
+VARIABLES = ["return_mean", "length_mean", "approx_kl", "clip_fraction", "entropy", "policy_objective", "value_loss",
+             "explained_variance", "lr"]  # fmt: skip
+SETTLED = 5  # the healthy ranges leave out the first updates, while the critic and the statistics settle
+
+
+FEATURE_LEGEND = {
+    "completed": "updates made / updates planned (below 1: the run stopped on a non-finite loss)",
+    "kl_first5": "mean approx_kl over updates 1-5",
+    "kl_median": "median approx_kl over all updates",
+    "kl_max": "largest approx_kl of any update",
+    "clip_first5": "mean clip_fraction over updates 1-5",
+    "clip_median": "median clip_fraction over all updates",
+    "clip_max_first_half": "largest clip_fraction in the first half of the run (annealed ε sends it to 1 late)",
+    "entropy_change_first10": "entropy at update 10 minus entropy at update 1 (nats)",
+    "entropy_change": "entropy at the last update minus entropy at update 1 (nats)",
+    "ev_last_quarter": "mean explained_variance over the last quarter of the updates",
+    "ev_median": "median explained_variance over all updates",
+    "ev_max": "largest explained_variance of any update",
+    "value_loss_growth": "log10(mean value_loss over the last quarter / mean value_loss over updates 1-5)",
+    "return_gain": "mean return_mean over the last quarter / mean of the first 5 finite return_mean",
+    "lr_start": "lr at update 1 (what config.json says; not a behaviour)",
+    "return_vs_healthy": "mean return_mean over the last quarter / the same for the median healthy seed of the task",
+}
+
+
+def runs_of(rows) -> dict:
+    """{(mode, task, seed): {variable: array over the updates}} from the rows of atlas_runs.csv."""
+    grouped = {}
+    for row in rows:
+        grouped.setdefault((row["mode"], row["task"], int(row["seed"])), []).append(row)
+    return {key: {k: np.array([float(r[k]) for r in group]) for k in VARIABLES} for key, group in grouped.items()}
+
+
+def _mean(x) -> float:
+    x = x[np.isfinite(x)]
+    return float(np.mean(x)) if len(x) else float("nan")
+
+
+def features(run: dict, planned: int) -> dict:
+    """One run's numbers that a rule may read; each says its window of updates."""
+    kl, clip, entropy, ev, vl, ret = (run[k] for k in ("approx_kl", "clip_fraction", "entropy", "explained_variance",
+                                                        "value_loss", "return_mean"))  # fmt: skip
+    n = len(kl)
+    last = slice(n - max(1, n // 4), n)  # the last quarter of the run
+    start = ret[np.isfinite(ret)][:5]
+    return {
+        "completed": n / planned,  # the fraction of the planned updates made before it stopped (non-finite)
+        "kl_first5": _mean(kl[:5]),
+        "kl_median": float(np.nanmedian(kl)),
+        "kl_max": float(np.nanmax(kl)),
+        "clip_first5": _mean(clip[:5]),
+        "clip_median": float(np.nanmedian(clip)),
+        "clip_max_first_half": float(np.nanmax(clip[: max(1, n // 2)])),
+        "entropy_change_first10": float(entropy[min(9, n - 1)] - entropy[0]),
+        "entropy_change": float(entropy[-1] - entropy[0]),
+        "ev_last_quarter": _mean(ev[last]),
+        "ev_median": float(np.nanmedian(ev)) if np.isfinite(ev).any() else float("nan"),
+        "ev_max": float(np.nanmax(ev)) if np.isfinite(ev).any() else float("nan"),
+        "value_loss_growth": float(np.log10(_mean(vl[last]) / _mean(vl[:5]))),  # log10 of last quarter / first 5
+        "return_gain": _mean(ret[last]) / np.mean(start) if len(start) else float("nan"),  # last quarter / first 5
+        "lr_start": float(run["lr"][0]),  # config-visible: the step size at update 1
+    }
+
+
+def all_features(runs: dict) -> dict:
+    """{(mode, task, seed): features}, with return_vs_healthy: the last quarter's mean return over the median of the
+    healthy seeds' on the same task (the one feature that needs a task's healthy runs to read)."""
+    planned = {task: updates for task, (_, updates) in TASKS.items()}
+    feats = {key: features(run, planned[key[1]]) for key, run in runs.items()}
+    for task in TASKS:
+        finals = [_mean(run["return_mean"][-max(1, len(run["return_mean"]) // 4) :])
+                  for (mode, t, _), run in runs.items() if mode == "healthy" and t == task]  # fmt: skip
+        reference = float(np.median(finals)) if finals else float("nan")
+        for (mode, t, seed), run in runs.items():
+            if t == task:
+                final = _mean(run["return_mean"][-max(1, len(run["return_mean"]) // 4) :])
+                feats[mode, t, seed]["return_vs_healthy"] = final / reference
+    return feats
+
+
+def healthy_ranges(runs: dict) -> list[dict]:
+    table = []
+    for task in TASKS:
+        mine = [run for (mode, t, _), run in runs.items() if mode == "healthy" and t == task]
+        for name in VARIABLES:
+            values = np.concatenate([run[name][SETTLED:] for run in mine]) if mine else np.array([])
+            values = values[np.isfinite(values)]
+            if len(values):
+                low, mid, high = np.min(values), np.median(values), np.max(values)
+                table.append({"task": task, "variable": name, "seeds": len(mine), "updates": f">{SETTLED}",
+                              "min": f"{low:.4g}", "median": f"{mid:.4g}", "max": f"{high:.4g}"})  # fmt: skip
+    return table
+
+
+def _holds(value: float, direction: str, threshold: float) -> bool:
+    return bool(np.isfinite(value) and (value > threshold if direction == ">" else value < threshold))
+
+
+RULE_FEATURES = [name for name in FEATURE_LEGEND if name != "lr_start"]  # behaviour only: config.json shows the lr
+# ratios and non-negative quantities that span decades are compared on a log10 scale (0 counts as 1e-6)
+LOG_FEATURES = {"kl_first5", "kl_median", "kl_max", "clip_first5", "clip_median", "clip_max_first_half",
+                "return_gain", "return_vs_healthy"}  # fmt: skip
+ROBUST = 0.1  # a rule is robust when its threshold lies at least this fraction of the healthy spread from both sides
+
+
+def _all_hold(conditions, values) -> bool:
+    return all(all(_holds(v[name], direction, threshold) for name, direction, threshold in conditions) for v in values)
+
+
+def _confusions(conditions, groups, mode) -> list[str]:
+    return [f"{m} ({t})" for (m, t), vs in groups.items() if m not in (mode, "healthy") and _all_hold(conditions, vs)]
+
+
+def _single_rules(values, healthy, groups, mode) -> list[tuple]:
+    """Every (feature, direction) as a rule with its threshold between the mode's seeds and the healthy runs."""
+    rules = []
+    for name in RULE_FEATURES:
+        h = np.array([v[name] for v in healthy if np.isfinite(v[name])])
+        f = np.array([v[name] for v in values])
+        spread = h.max() - h.min() + 1e-12
+        for direction in (">", "<"):
+            edge = h.max() if direction == ">" else h.min()
+            held = int(np.sum(f > edge if direction == ">" else f < edge))
+            if held == len(f):
+                inner = f.min() if direction == ">" else f.max()
+                threshold = float((inner + edge) / 2)
+                margin = min(abs(inner - threshold), abs(threshold - edge)) / spread
+            else:
+                threshold, margin = float(edge), -1.0
+            conditions = [(name, direction, threshold)]
+            confused = _confusions(conditions, groups, mode)
+            false_alarms = sum(_all_hold(conditions, [v]) for v in healthy)
+            rules.append((held, -false_alarms, margin >= ROBUST, -len(confused), margin, conditions, confused))
+    return rules
+
+
+def _pair_rules(values, healthy, groups, mode) -> list[tuple]:
+    """Two conditions that hold together on every seed of the mode and on no healthy run, each alone pointing away
+    from the healthy runs (false on at least half of them), each threshold ROBUST of the healthy spread beyond the
+    mode's least extreme seed."""
+    conditions = []
+    for name in RULE_FEATURES:
+        h = np.array([v[name] for v in healthy if np.isfinite(v[name])])
+        f = np.array([v[name] for v in values])
+        if not np.isfinite(f).all():
+            continue
+        spread = h.max() - h.min() + 1e-12
+        for condition in [(name, ">", float(f.min() - ROBUST * spread)), (name, "<", float(f.max() + ROBUST * spread))]:
+            excluded = sum(not _all_hold([condition], [v]) for v in healthy) / len(healthy)
+            if excluded >= 0.5:
+                conditions.append((excluded, condition))
+    rules = []
+    for i, (first_excluded, first) in enumerate(conditions):
+        for second_excluded, second in conditions[i + 1 :]:
+            if first[0] == second[0] or any(_all_hold([first, second], [v]) for v in healthy):
+                continue
+            confused = _confusions([first, second], groups, mode)
+            rules.append((len(values), 0, True, -len(confused), first_excluded + second_excluded, [first, second],
+                          confused))  # fmt: skip
+    return rules
+
+
+def signature_rules(runs: dict) -> list[dict]:
+    """Per (mode, task): a rule on the features that holds on all the mode's seeds and on no healthy run of any task.
+
+    First one feature with one threshold, placed between the mode's seeds and the healthy runs (the geometric mean of
+    the two edges; LOG_FEATURES on a log scale): robust ones first (the threshold at least ROBUST of the
+    healthy spread from both), then the fewest other modes on which it also holds on every seed, then the widest
+    margin. When that one is not robust or also holds on another mode, two features together are tried. A mode with
+    no rule gets the feature that holds on the most seeds, with the healthy extreme as its threshold."""
+    groups = {}
+    for (mode, task, _), value in all_features(runs).items():
+        scaled = {k: float(np.log10(max(v, 1e-6))) if k in LOG_FEATURES else v for k, v in value.items()}
+        groups.setdefault((mode, task), []).append(scaled)
+    healthy = [value for (mode, _), values in groups.items() if mode == "healthy" for value in values]
+    table = []
+    for (mode, task), values in groups.items():
+        if mode == "healthy":
+            continue
+        best = max(_single_rules(values, healthy, groups, mode), key=lambda rule: rule[:5])
+        if best[0] == len(values) and best[1] == 0 and not (best[2] and best[3] == 0):
+            pairs = _pair_rules(values, healthy, groups, mode)
+            if pairs and (pair := max(pairs, key=lambda rule: rule[:5]))[3] > best[3] - (not best[2]):
+                best = pair
+        held, minus_alarms, robust, _, margin, conditions, confused = best
+        found = held == len(values) and minus_alarms == 0
+        also = f"; also holds on {len(confused)} other (mode, task)" if confused else ""
+        verdict = "not separated from healthy" if not found else "separated" + also
+        verdict = "not robustly separated from healthy" if found and not robust else verdict
+        config_fields = sorted(FAULTS[mode].changes(task_config(task, 1)))
+        rule = " and ".join(f"{name} {direction} {10**threshold if name in LOG_FEATURES else threshold:.3g}"
+                            for name, direction, threshold in conditions)  # fmt: skip
+        table.append({"mode": mode, "task": task, "rule": rule, "seeds_holding": f"{held}/{len(values)}",
+                      "healthy_false_alarms": f"{-minus_alarms}/{len(healthy)}",
+                      "margin": f"{margin:.3g}" if len(conditions) == 1 else "", "verdict": verdict,
+                      "also_holds_on": "; ".join(confused), "in_config_json": " ".join(config_fields)})  # fmt: skip
+    return table
+
+
+def summarize() -> int:
+    runs = runs_of(read_rows(RUNS_CSV))
+    feats = all_features(runs)
+    per_run = [{"mode": m, "task": t, "seed": s, **{k: f"{v:.4g}" for k, v in feats[m, t, s].items()}}
+               for (m, t, s) in sorted(runs)]  # fmt: skip
+    common.write_rows(common.RESULTS / "atlas_features.csv", per_run)
+    common.write_rows(RANGES_CSV, healthy_ranges(runs))
+    legend = [{"feature": name, "meaning": text} for name, text in FEATURE_LEGEND.items()]
+    common.write_rows(common.RESULTS / "atlas_feature_legend.csv", legend)
+    rules = signature_rules(runs)
+    common.write_rows(SIGNATURES_CSV, rules)
+    for row in rules:
+        print(
+            f"{row['mode']:28} {row['task']:12} {row['rule']:44} {row['seeds_holding']} seeds, healthy "
+            f"{row['healthy_false_alarms']}, margin {row['margin']:>6} {row['verdict']}; {row['also_holds_on']}"
+        )
+    return 0
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.atlas", description=__doc__.split("\n\n")[0])
+    commands = parser.add_subparsers(dest="command", required=True)
+    run = commands.add_parser("run", help="make the runs not yet recorded, one after the other")
+    run.add_argument("--modes", nargs="+", default=list(FAULTS), choices=list(FAULTS))
+    run.add_argument("--tasks", nargs="+", default=list(TASKS), choices=list(TASKS))
+    run.add_argument("--seeds", nargs="+", type=int, default=list(SEEDS))
+    commands.add_parser("summarize", help="healthy ranges and a signature rule per mode, from the record")
+    commands.add_parser("list", help="the modes: what each injects, its cause and its fix")
+    args = parser.parse_args(argv)
+    if args.command == "run":
+        return record_runs(args.modes, args.tasks, args.seeds, argv)
+    if args.command == "summarize":
+        return summarize()
+    for fault in FAULTS.values():
+        print(f"{fault.name}\n  injects: {fault.injected}\n  cause: {fault.cause}\n  fix: {fault.fix}")
+        for task, why in fault.not_applicable.items():
+            print(f"  not on {task}: {why}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
