@@ -299,7 +299,7 @@ def sweep_file_words(line: str) -> list[str]:
 
 
 def cmd_grade(args) -> int:
-    from minippo.grade import autograder_zip, grade, grade_class
+    from minippo.grading.grade import autograder_zip, grade, grade_class
 
     if args.class_folder is not None:
         if args.solutions:

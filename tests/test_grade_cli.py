@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from minippo import grade
+from minippo.grading import grade
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from minippo import grade, sandbox
+from minippo.grading import grade, sandbox
 
 ROOT = Path(__file__).resolve().parents[1]
 SOLUTION = (ROOT / "solutions" / "ch05_clipping.py").read_text(encoding="utf-8")

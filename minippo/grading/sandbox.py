@@ -1,4 +1,4 @@
-"""The judge's side of grading a student's module in a worker process (minippo/worker.py).
+"""The judge's side of grading a student's module in a worker process (minippo/grading/worker.py).
 
 ``Sandbox(folder, chapter)`` copies the student's folder and minippo into a private temporary folder and starts
 ``python -I worker.py`` there, with the process limits below (CPU seconds, address space, file size, processes) and,
@@ -30,9 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
-from minippo.worker import WireError, arrays_in, pack, read_frame, unpack, write_frame
+from minippo.grading.worker import WireError, arrays_in, pack, read_frame, unpack, write_frame
 
-PACKAGE = Path(__file__).resolve().parent
+PACKAGE = Path(__file__).resolve().parents[1]  # minippo, copied whole for the worker
 ROOT = PACKAGE.parent
 LIMITS = {
     "cpu_s": 900,  # the whole worker (one chapter), far above what the per-test time limits allow
@@ -87,8 +87,7 @@ LIBRARY_ANSWERS = {
                       "minippo.lm.dpo": ["dpo_loss", "dpo_loss_and_grad"]},
 }  # fmt: skip
 # what no submission needs: the reference, the tests, the grader
-FORBIDDEN_IMPORTS = ("solutions", "_harness", "pytest", "_pytest", "minippo.grade", "minippo.sandbox",
-                     "minippo.worker", "tests")  # fmt: skip
+FORBIDDEN_IMPORTS = ("solutions", "_harness", "pytest", "_pytest", "minippo.grading", "tests")
 
 
 class StudentRaised(Exception):
@@ -209,7 +208,7 @@ class Sandbox:
         run.mkdir()
         from_judge, to_worker = os.pipe()  # (read end, write end)
         from_worker, to_judge = os.pipe()
-        command = [sys.executable, "-I", str(lib / "minippo" / "worker.py"), str(from_judge), str(to_judge)]
+        command = [sys.executable, "-I", str(lib / "minippo" / "grading" / "worker.py"), str(from_judge), str(to_judge)]
         hidden = [str(p) for p in self._hidden()]
         if self.isolation == "namespaces":
             command = ["unshare", "--mount", "--pid", "--fork", "--kill-child", "--mount-proc", "sh", "-c",

@@ -11,12 +11,12 @@ Which code is graded: exercises/ by default; solutions/ with --solutions; a fold
 environment variable MINIPPO_IMPL (``exercises``, ``solutions``, or a folder holding chNN_*.py modules). With --class,
 every sub-folder of FOLDER is one student's folder of chNN_*.py modules, graded in its own process.
 
-A student's code never runs in the test process: the tests call it through a worker process (minippo.sandbox and
-minippo.worker) that cannot see the repository, the other students or this log, under CPU, memory, file-size and
-process limits. Every record of the log is signed with a key only this process and its tests know, so a record the
-tests did not write is ignored (and reported). What the worker or the source scan saw a submission do that an
-instructor should know of (importing the reference, using minippo's own version of the exercise, reaching for the
-grader's files) goes to the integrity column; how far the worker was isolated, to the isolation column.
+A student's code never runs in the test process: the tests call it through a worker process (minippo.grading.sandbox and
+minippo.grading.worker) that cannot see the repository, the other students or this log, under CPU, memory, file-size and
+process limits. Every record of the log is signed with a key only this process and its tests know, so a record the tests
+did not write is ignored (and reported). What the worker or the source scan saw a submission do that an instructor
+should know of (importing the reference, using minippo's own version of the exercise, reaching for the grader's files)
+goes to the integrity column; how far the worker was isolated, to the isolation column.
 ``--gradescope FILE`` writes the results in Gradescope's results.json format; ``--autograder-zip`` builds the zip
 Gradescope runs.
 
@@ -42,7 +42,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 TESTS = ROOT / "tests" / "exercises"
 BOOK = ROOT / "book"
 IMPL_VARIABLE = "MINIPPO_IMPL"
@@ -126,7 +126,7 @@ def resolve_chapter(text: str) -> int | None:
     return None
 
 
-# the pytest plugin: loaded in the child process with ``-p minippo.grade``
+# the pytest plugin: loaded in the child process with ``-p minippo.grading.grade``
 
 _variant_of_test: dict[str, str] = {}
 _rejected_variants: set[str] = set()
@@ -265,7 +265,7 @@ def run_tests(
             log = Path(folder) / f"results-{attempt}.jsonl"
             env[LOG_VARIABLE] = str(log)
             command = [
-                sys.executable, "-m", "pytest", *targets, "-p", "minippo.grade", "-p", "no:cacheprovider",
+                sys.executable, "-m", "pytest", *targets, "-p", "minippo.grading.grade", "-p", "no:cacheprovider",
                 "-q", "--no-header", "-o", "addopts=", "--continue-on-collection-errors", "--tb=line", *extra_args,
             ]  # fmt: skip
             returncode = None
