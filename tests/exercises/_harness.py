@@ -241,7 +241,7 @@ class RemoteStudent:
 
     def _report(self) -> None:
         """Pass the worker's new integrity notes to the grader's log, as notes of this chapter."""
-        from minippo.grading.grade import log_integrity
+        from minippo.grading.plugin import log_integrity
         from minippo.grading.sandbox import answer_note
 
         for note in self._sandbox.take_notes():
@@ -309,7 +309,7 @@ _sandboxes: dict[Path, object] = {}  # one worker per student folder, for all it
 
 
 def _load_isolated(chapter: str, folder: Path, where: str):
-    from minippo.grading.grade import LOG_VARIABLE, log_integrity
+    from minippo.grading.plugin import LOG_VARIABLE, log_integrity
     from minippo.grading.sandbox import Sandbox, WorkerDied, scan_source
 
     if folder not in _sandboxes:

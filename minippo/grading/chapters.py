@@ -1,0 +1,88 @@
+"""The chapters ``minippo grade`` grades, and their names.
+
+The chapters are found, not listed: a chapter is graded when tests/exercises/test_chNN_<topic>.py exists, and its
+book name (``minippo grade the-min``) comes from book/NN-<name>.md. A new chapter needs only those two files.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+TESTS = ROOT / "tests" / "exercises"
+BOOK = ROOT / "book"
+# the book's chapter names, so "minippo grade the-min" works as well as "minippo grade 6"; book_names() adds any
+# book/NN-<name>.md page that is not here
+BOOK_NAMES = {
+    1: "network",
+    2: "distributions",
+    3: "vanilla-pg",
+    4: "cpi",
+    5: "clipping",
+    6: "the-min",
+    7: "advantages",
+    8: "shared-network",
+    9: "kl-penalty",
+    10: "everything-together",
+    11: "mujoco",
+    12: "pixels",
+    13: "language-model",
+}
+
+
+def chapter_files() -> dict[int, Path]:
+    """{chapter number: its grading test file}."""
+    files = {}
+    for path in sorted(TESTS.glob("test_ch[0-9][0-9]_*.py")):
+        files[int(path.name[7:9])] = path
+    return files
+
+
+def book_names() -> dict[int, str]:
+    """{chapter number: the book page's name}, from book/NN-<name>.md, with BOOK_NAMES for what the book lacks."""
+    names = dict(BOOK_NAMES)
+    for page in BOOK.glob("[0-9][0-9]-*.md"):
+        names[int(page.name[:2])] = page.stem[3:]
+    return names
+
+
+def chapter_title(number: int) -> str:
+    path = chapter_files().get(number)
+    topic = path.stem[10:] if path else book_names().get(number, "")
+    return f"ch{number:02d} {topic.replace('_', ' ')}"
+
+
+def chapter_of_nodeid(nodeid: str) -> int:
+    match = re.search(r"test_ch(\d\d)_", nodeid)
+    return int(match.group(1)) if match else 0
+
+
+def resolve_chapter(text: str) -> int | None:
+    """'5', '05', 'ch05', 'clipping', 'ch05_clipping', 'the-min' -> 5; None if no chapter has that name."""
+    key = text.strip().lower().replace("-", "_").removesuffix(".py")
+    match = re.fullmatch(r"(?:ch(?:apter)?)?_?0*(\d+)(?:_\w*)?", key)
+    if match:
+        return int(match.group(1))
+    for number, path in chapter_files().items():
+        if key in (path.stem[10:], path.stem[5:]):
+            return number
+    for number, name in book_names().items():
+        if key == name.replace("-", "_"):
+            return number
+    return None
+
+
+def chapters_to_grade(chapter) -> list[int]:
+    """The chapter numbers to grade; raises ValueError with the one-line reason for a bad name."""
+    files = chapter_files()
+    if not files:
+        raise ValueError(f"no grading tests found in {TESTS} (grade from the course's repository)")
+    if chapter is None:
+        return sorted(files)
+    number = resolve_chapter(str(chapter))
+    if number is None or number not in files:
+        known = ", ".join(f"{n} ({chapter_title(n)[5:]})" for n in sorted(files))
+        why = f"chapter {number} has no exercise" if number in book_names() else f"unknown chapter '{chapter}'"
+        raise ValueError(f"{why}; chapters with exercises: {known}")
+    return [number]

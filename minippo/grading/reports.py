@@ -1,0 +1,66 @@
+"""What ``minippo grade`` prints and writes: the scoreboard, every failing test, and a class's CSV."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from minippo.grading.chapters import chapter_title
+
+
+def scoreboard(results, numbers) -> tuple[list[str], bool]:
+    lines, all_passed = [], True
+    width = max(len(chapter_title(n)) for n in numbers)
+    total_passed = total = 0
+    for number in numbers:
+        mine = [r for r in results if r.chapter == number]
+        passed = sum(r.outcome == "passed" for r in mine)
+        total_passed, total = total_passed + passed, total + len(mine)
+        first_failure = next((r for r in mine if r.outcome != "passed"), None)
+        if not mine:
+            comment = "no tests ran"
+        elif first_failure is None:
+            comment = "all passed"
+        else:
+            comment = first_failure.message
+        if not mine or first_failure is not None:
+            all_passed = False
+        score = f"{passed}/{len(mine)}"
+        lines.append(f"{chapter_title(number):<{width}}  {score:>7}  {comment}")
+    lines.append(f"{'total':<{width}}  {f'{total_passed}/{total}':>7}")
+    return lines, all_passed and total > 0
+
+
+def failures_in_detail(results, numbers) -> list[str]:
+    """Every failing test of the chapters, each with its message, for ``--verbose``."""
+    lines = []
+    for number in numbers:
+        failing = [r for r in results if r.chapter == number and r.outcome != "passed"]
+        if failing:
+            lines.append(f"{chapter_title(number)}: {len(failing)} failing")
+            lines.extend(f"  {r.nodeid.split('::', 1)[-1]}: {r.message}" for r in failing)
+    return lines
+
+
+def integrity_notes(integrity: dict, number: int) -> list[str]:
+    """What the instructor should know of one chapter's submission: its own notes and the log's."""
+    return integrity.get(number, []) + integrity.get("log", [])
+
+
+def write_fresh(path: Path, text: str) -> None:
+    """Write ``text`` to a new file at ``path``: whatever stood there (a link a submission left, say) is removed
+    first, so the file written is the grader's own."""
+    if path.is_symlink() or path.is_file():
+        path.unlink()
+    with open(path, "x", encoding="utf-8", newline="") as handle:
+        handle.write(text)
+
+
+def csv_cell(value) -> str:
+    """A CSV cell that a spreadsheet shows as text: one line, and a leading = + - @ (a formula) quoted with '."""
+    text = " ".join(str(value).split())
+    if text[:1] in ("=", "+", "-", "@", "\t", "\r", "|", "%"):
+        text = "'" + text
+    return text
+
+
+CSV_FIELDS = ["student", "chapter", "passed", "total", "first_failure", "integrity", "isolation"]
