@@ -9,6 +9,8 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+from minippo.errors import MinippoError
+
 ROOT = Path(__file__).resolve().parents[2]
 TESTS = ROOT / "tests" / "exercises"
 BOOK = ROOT / "book"
@@ -74,15 +76,15 @@ def resolve_chapter(text: str) -> int | None:
 
 
 def chapters_to_grade(chapter) -> list[int]:
-    """The chapter numbers to grade; raises ValueError with the one-line reason for a bad name."""
+    """The chapter numbers to grade: ``chapter``'s, or every one if it is None; MinippoError for a bad name."""
     files = chapter_files()
     if not files:
-        raise ValueError(f"no grading tests found in {TESTS} (grade from the course's repository)")
+        raise MinippoError(f"no grading tests found in {TESTS} (grade from the course's repository)")
     if chapter is None:
         return sorted(files)
     number = resolve_chapter(str(chapter))
     if number is None or number not in files:
         known = ", ".join(f"{n} ({chapter_title(n)[5:]})" for n in sorted(files))
         why = f"chapter {number} has no exercise" if number in book_names() else f"unknown chapter '{chapter}'"
-        raise ValueError(f"{why}; chapters with exercises: {known}")
+        raise MinippoError(f"{why}; chapters with exercises: {known}")
     return [number]

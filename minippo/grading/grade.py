@@ -24,19 +24,18 @@ import sys
 import time
 from pathlib import Path
 
+from minippo.errors import MinippoError
 from minippo.grading.chapters import chapter_files, chapter_title, chapters_to_grade
 from minippo.grading.gradescope import gradescope_results
 from minippo.grading.reports import CSV_FIELDS, csv_cell, failures_in_detail, integrity_notes, scoreboard, write_fresh
 from minippo.grading.supervisor import IMPL_VARIABLE, RUN_LIMIT_S, run_tests
 
 
-def _check_pytest_timeout() -> bool:
+def _require_pytest_timeout() -> None:
     try:
         import pytest_timeout  # noqa: F401 - the per-test time limits need it
     except ImportError:
-        print("minippo: error: grading needs pytest and pytest-timeout: pip install -e '.[grade]'", file=sys.stderr)
-        return False
-    return True
+        raise MinippoError("grading needs pytest and pytest-timeout: pip install -e '.[grade]'") from None
 
 
 def find_submission(folder: Path) -> Path:
@@ -58,31 +57,23 @@ def grade(
     verbose: bool = False,
     gradescope: str | None = None,
 ) -> int:
-    """Grade one chapter (or all), print the scoreboard; 0 if every test passed, 1 if not, 2 for bad input.
+    """Grade one chapter (or all), print the scoreboard; 0 if every test passed, 1 if not (MinippoError for bad input).
     ``verbose`` lists every failing test with its message below the scoreboard; ``gradescope`` also writes the
     results to that file in Gradescope's results.json format."""
     out = out or sys.stdout
     started = time.monotonic()
-    try:
-        numbers = chapters_to_grade(chapter)
-    except ValueError as error:
-        print(f"minippo: error: {error}", file=sys.stderr)
-        return 2
+    numbers = chapters_to_grade(chapter)
     if gradescope is not None and not Path(gradescope).expanduser().resolve().parent.is_dir():
-        print(f"minippo: error: no folder for the results file {gradescope}", file=sys.stderr)
-        return 2
+        raise MinippoError(f"no folder for the results file {gradescope}")
     if gradescope is not None and Path(gradescope).expanduser().is_dir():
-        print(f"minippo: error: {gradescope} is a folder; --gradescope takes the results file's name", file=sys.stderr)
-        return 2
-    if not _check_pytest_timeout():
-        return 2
+        raise MinippoError(f"{gradescope} is a folder; --gradescope takes the results file's name")
+    _require_pytest_timeout()
     files = chapter_files()
     if impl is None:
         impl = "solutions" if solutions else os.environ.get(IMPL_VARIABLE, "").strip() or "exercises"
     if impl not in ("exercises", "solutions", "wrong", "right"):
         if not Path(impl).expanduser().is_dir():
-            print(f"minippo: error: no submission folder {impl}", file=sys.stderr)
-            return 2
+            raise MinippoError(f"no submission folder {impl}")
         impl = str(find_submission(Path(impl).expanduser().resolve()))
     where = f"{impl}/" if impl in ("exercises", "solutions") else impl
     print(
@@ -118,28 +109,18 @@ def grade_class(
     student's code runs in its own child process under the same per-test time limits (and ``limit_s`` for the whole
     student), so an endless loop or a crash costs only that student's line. Writes one CSV row per student and
     chapter (student, chapter, passed, total, first_failure) to ``csv_path`` and prints the same as a table.
-    Returns 0 once every student is graded, 2 for bad input."""
+    Returns 0 once every student is graded; raises MinippoError for bad input."""
     out = out or sys.stdout
     root = Path(folder).expanduser()
     if not root.is_dir():
-        print(f"minippo: error: no class folder {folder}", file=sys.stderr)
-        return 2
+        raise MinippoError(f"no class folder {folder}")
     students = sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith((".", "_")))
     if not students:
-        print(
-            f"minippo: error: {folder} holds no student folders (one folder of chNN_*.py files each)", file=sys.stderr
-        )
-        return 2
-    try:
-        numbers = chapters_to_grade(chapter)
-    except ValueError as error:
-        print(f"minippo: error: {error}", file=sys.stderr)
-        return 2
+        raise MinippoError(f"{folder} holds no student folders (one folder of chNN_*.py files each)")
+    numbers = chapters_to_grade(chapter)
     if csv_path is not None and not Path(csv_path).expanduser().resolve().parent.is_dir():
-        print(f"minippo: error: no folder for the CSV file {csv_path}", file=sys.stderr)
-        return 2
-    if not _check_pytest_timeout():
-        return 2
+        raise MinippoError(f"no folder for the CSV file {csv_path}")
+    _require_pytest_timeout()
     files = chapter_files()
     print(
         f"Grading {len(students)} students in {folder} (chapter {', '.join(map(str, numbers))}).", file=out, flush=True

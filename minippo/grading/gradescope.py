@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import re
-import sys
 from pathlib import Path
 
+from minippo.errors import MinippoError
 from minippo.grading.chapters import chapter_title, chapters_to_grade
 from minippo.grading.reports import integrity_notes
 
@@ -64,27 +64,19 @@ exit 0
 
 def autograder_zip(path: str, repo: str, commit: str, chapter: str | None = None, python: str = "") -> int:
     """Write Gradescope's autograder zip: setup.sh (installs minippo's grading extra from ``repo`` at ``commit``) and
-    run_autograder (grades /autograder/submission, ``chapter`` or every chapter). 0, or 2 for bad input."""
+    run_autograder (grades /autograder/submission, ``chapter`` or every chapter). 0; MinippoError for bad input."""
     import zipfile
 
     if not re.fullmatch(r"[0-9a-fA-F]{7,40}|[\w./-]+", commit) or commit.startswith("-"):
-        print(f"minippo: error: not a commit: {commit}", file=sys.stderr)
-        return 2
+        raise MinippoError(f"not a commit: {commit}")
     if not repo or any(c in repo for c in " '\"\n;&|$`") or repo.startswith("-"):
-        print(f"minippo: error: not a repository address: {repo}", file=sys.stderr)
-        return 2
-    if chapter is not None:
-        try:
-            number = chapters_to_grade(chapter)[0]
-        except ValueError as error:
-            print(f"minippo: error: {error}", file=sys.stderr)
-            return 2
+        raise MinippoError(f"not a repository address: {repo}")
+    number = chapters_to_grade(chapter)[0] if chapter is not None else None
     target = Path(path).expanduser()
     if not target.resolve().parent.is_dir():
-        print(f"minippo: error: no folder for {path}", file=sys.stderr)
-        return 2
+        raise MinippoError(f"no folder for {path}")
     run = RUN_AUTOGRADER.format(
-        python=python or "/autograder/venv/bin/python", chapter=f"{number} " if chapter is not None else ""
+        python=python or "/autograder/venv/bin/python", chapter=f"{number} " if number is not None else ""
     )
     with zipfile.ZipFile(target, "w") as archive:
         for name, text in (("setup.sh", SETUP_SH.format(repo=repo, commit=commit)), ("run_autograder", run)):
