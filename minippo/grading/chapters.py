@@ -7,46 +7,48 @@ book name (``minippo grade the-min``) comes from book/NN-<name>.md. A new chapte
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass
 from pathlib import Path
 
 from minippo.errors import MinippoError
 
-ROOT = Path(__file__).resolve().parents[2]
-TESTS = ROOT / "tests" / "exercises"
-BOOK = ROOT / "book"
-# the book's chapter names, so "minippo grade the-min" works as well as "minippo grade 6"; book_names() adds any
-# book/NN-<name>.md page that is not here
-BOOK_NAMES = {
-    1: "network",
-    2: "distributions",
-    3: "vanilla-pg",
-    4: "cpi",
-    5: "clipping",
-    6: "the-min",
-    7: "advantages",
-    8: "shared-network",
-    9: "kl-penalty",
-    10: "everything-together",
-    11: "mujoco",
-    12: "pixels",
-    13: "language-model",
-}
+
+@dataclass(frozen=True)
+class Course:
+    """Where the graded course's files are: its repository, the grading tests and the book's pages."""
+
+    root: Path
+
+    @property
+    def tests(self) -> Path:
+        return self.root / "tests" / "exercises"
+
+    @property
+    def book(self) -> Path:
+        return self.root / "book"
+
+
+def course() -> Course:
+    """The course: the repository minippo is installed from (``pip install -e .``), the one place the grading tests and
+    the book's pages are looked for. Raises MinippoError when it holds no grading tests (minippo from a wheel, say)."""
+    found = Course(Path(__file__).resolve().parents[2])
+    if not any(found.tests.glob("test_ch[0-9][0-9]_*.py")):
+        raise MinippoError(f"no grading tests found in {found.tests} (grade from the course's repository)")
+    return found
 
 
 def chapter_files() -> dict[int, Path]:
     """{chapter number: its grading test file}."""
     files = {}
-    for path in sorted(TESTS.glob("test_ch[0-9][0-9]_*.py")):
+    for path in sorted(course().tests.glob("test_ch[0-9][0-9]_*.py")):
         files[int(path.name[7:9])] = path
     return files
 
 
 def book_names() -> dict[int, str]:
-    """{chapter number: the book page's name}, from book/NN-<name>.md, with BOOK_NAMES for what the book lacks."""
-    names = dict(BOOK_NAMES)
-    for page in BOOK.glob("[0-9][0-9]-*.md"):
-        names[int(page.name[:2])] = page.stem[3:]
-    return names
+    """{chapter number: the book page's name}, from book/NN-<name>.md, so that "minippo grade the-min" works as well as
+    "minippo grade 6"."""
+    return {int(page.name[:2]): page.stem[3:] for page in sorted(course().book.glob("[0-9][0-9]-*.md"))}
 
 
 def chapter_title(number: int) -> str:
@@ -78,8 +80,6 @@ def resolve_chapter(text: str) -> int | None:
 def chapters_to_grade(chapter) -> list[int]:
     """The chapter numbers to grade: ``chapter``'s, or every one if it is None; MinippoError for a bad name."""
     files = chapter_files()
-    if not files:
-        raise MinippoError(f"no grading tests found in {TESTS} (grade from the course's repository)")
     if chapter is None:
         return sorted(files)
     number = resolve_chapter(str(chapter))

@@ -30,10 +30,10 @@ from pathlib import Path
 
 import numpy as np
 
+from minippo.grading.chapters import course
 from minippo.grading.worker import WireError, arrays_in, pack, read_frame, unpack, write_frame
 
 PACKAGE = Path(__file__).resolve().parents[1]  # minippo, copied whole for the worker
-ROOT = PACKAGE.parent
 LIMITS = {
     "cpu_s": 900,  # the whole worker (one chapter), far above what the per-test time limits allow
     "memory_bytes": 4 << 30,  # address space
@@ -178,7 +178,7 @@ class Sandbox:
     def __init__(self, folder: Path, hide=(), limits: dict | None = None):
         self.folder = Path(folder)
         self.limits = dict(LIMITS, **(limits or {}))
-        self.hide = [Path(p) for p in (ROOT, *hide)]
+        self.hide = [Path(p) for p in (course().root, *hide)]
         self.isolation = isolation()
         self.notes: list[str] = []  # what the worker reported, in order; take_notes() hands out the new ones
         self._taken = 0

@@ -20,7 +20,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from minippo.grading.chapters import ROOT, chapter_of_nodeid
+from minippo.grading.chapters import chapter_of_nodeid, course
 from minippo.grading.plugin import KEY_VARIABLE, LOG_VARIABLE, STOP_VARIABLE, TIME_FACTOR_VARIABLE, signature
 
 IMPL_VARIABLE = "MINIPPO_IMPL"
@@ -57,6 +57,7 @@ def run_tests(
     If the child process dies (student code that calls os._exit, crashes the interpreter or is killed), the test it
     was running fails with that reason and the tests that had not run yet run in a new child, so one crash costs one
     test. The whole run, restarts included, stops after ``limit_s`` seconds."""
+    root = course().root
     env = dict(os.environ)
     env[IMPL_VARIABLE] = impl
     if stop_at_first_failure:
@@ -84,7 +85,7 @@ def run_tests(
             returncode = None
             try:
                 left = max(1.0, deadline - time.monotonic())
-                finished = subprocess.run(command, cwd=ROOT, env=env, capture_output=True, text=True, timeout=left)
+                finished = subprocess.run(command, cwd=root, env=env, capture_output=True, text=True, timeout=left)
                 returncode = finished.returncode
                 if returncode not in (0, 1):
                     tail = (finished.stdout + finished.stderr).strip().splitlines()[-3:]
