@@ -20,9 +20,13 @@ TIME_FACTOR_VARIABLE = "MINIPPO_GRADE_TIME_FACTOR"
 
 _variant_of_test: dict[str, str] = {}
 _rejected_variants: set[str] = set()
+_key = ""  # the log's signing key, once pytest_configure has taken it out of the environment
 
 
-_KEY = os.environ.pop(KEY_VARIABLE, "")  # read once, when pytest loads this plugin, and kept out of the environment
+def pytest_configure(config) -> None:
+    """Take the signing key out of the environment before any test runs, so that nothing the tests run finds it."""
+    global _key
+    _key = os.environ.pop(KEY_VARIABLE, "")
 
 
 def signature(text: str, key: str) -> str:
@@ -34,7 +38,7 @@ def _log(record: dict) -> None:
     if path:
         text = json.dumps(record)
         with open(path, "a", encoding="utf-8") as handle:
-            handle.write(json.dumps({"record": text, "mac": signature(text, _KEY)}) + "\n")
+            handle.write(json.dumps({"record": text, "mac": signature(text, _key)}) + "\n")
 
 
 def log_integrity(chapter: str, note: str | None, isolation: str | None = None) -> None:
