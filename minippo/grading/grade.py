@@ -27,7 +27,15 @@ from pathlib import Path
 from minippo.errors import MinippoError
 from minippo.grading.chapters import chapter_files, chapter_title, chapters_to_grade
 from minippo.grading.gradescope import gradescope_results
-from minippo.grading.reports import CSV_FIELDS, csv_cell, failures_in_detail, integrity_notes, scoreboard, write_fresh
+from minippo.grading.reports import (
+    CSV_FIELDS,
+    chapter_score,
+    csv_cell,
+    failures_in_detail,
+    integrity_notes,
+    scoreboard,
+    write_fresh,
+)
 from minippo.grading.supervisor import IMPL_VARIABLE, RUN_LIMIT_S, run_tests
 
 
@@ -135,25 +143,23 @@ def grade_class(
             str(student.resolve()), [files[n] for n in numbers], limit_s=limit_s, integrity=integrity, hide=hidden
         )
         for number in numbers:
-            mine = [r for r in results if r.chapter == number]
-            passed = sum(r.outcome == "passed" for r in mine)
-            first = next((r for r in mine if r.outcome != "passed"), None)
-            comment = first.message if first else ("no tests ran" if not mine else "")
-            if note and not mine:
+            score = chapter_score(results, number)
+            comment = "" if score.all_passed else score.summary
+            if note and not score.total:
                 comment = note
             notes = "; ".join(integrity_notes(integrity, number))
-            row = {"student": csv_cell(student.name), "chapter": number, "passed": passed, "total": len(mine),
+            row = {"student": csv_cell(student.name), "chapter": number, "passed": score.passed, "total": score.total,
                    "first_failure": csv_cell(comment), "integrity": csv_cell(notes),
                    "isolation": integrity.get("isolation", "none")}  # fmt: skip
             rows.append(row)
-            score = f"{passed}/{len(mine)}"
+            fraction = f"{score.passed}/{score.total}"
             shown = " ".join(comment.split())
             shown = shown if len(shown) <= 100 else shown[:97] + "..."
             shown = shown or "all passed"
             if notes:
                 shown += f"  [integrity: {notes}]"
             name = " ".join(student.name.split())
-            print(f"{name:<{width}}  {chapter_title(number):<22}  {score:>7}  {shown}", file=out, flush=True)
+            print(f"{name:<{width}}  {chapter_title(number):<22}  {fraction:>7}  {shown}", file=out, flush=True)
     if csv_path is not None:
         table = io.StringIO()
         writer = csv.DictWriter(table, fieldnames=CSV_FIELDS)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from minippo.errors import MinippoError
 from minippo.grading.chapters import chapter_title, chapters_to_grade
-from minippo.grading.reports import integrity_notes
+from minippo.grading.reports import chapter_score, integrity_notes
 
 
 def gradescope_results(results, numbers, integrity: dict, seconds: float) -> dict:
@@ -15,10 +15,8 @@ def gradescope_results(results, numbers, integrity: dict, seconds: float) -> dic
     its output the first failure's message and any integrity note."""
     tests = []
     for number in numbers:
-        mine = [r for r in results if r.chapter == number]
-        passed = sum(r.outcome == "passed" for r in mine)
-        first = next((r for r in mine if r.outcome != "passed"), None)
-        output = (first.message if first else "all passed") if mine else "no tests ran"
+        score = chapter_score(results, number)
+        output = score.summary
         notes = integrity_notes(integrity, number)
         if notes:
             output += "\nIntegrity: " + "; ".join(notes)
@@ -26,9 +24,9 @@ def gradescope_results(results, numbers, integrity: dict, seconds: float) -> dic
             {
                 "name": chapter_title(number),
                 "number": str(number),
-                "score": float(passed),
-                "max_score": float(len(mine)),
-                "status": "passed" if mine and first is None else "failed",
+                "score": float(score.passed),
+                "max_score": float(score.total),
+                "status": "passed" if score.all_passed else "failed",
                 "output": output,
                 "visibility": "visible",
             }

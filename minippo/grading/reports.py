@@ -3,29 +3,47 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import NamedTuple
 
 from minippo.grading.chapters import chapter_title
 
 
+class Score(NamedTuple):
+    """One chapter's tests: how many passed, how many ran, and the first failure's message (None if none failed)."""
+
+    passed: int
+    total: int
+    first_failure: str | None
+
+    @property
+    def all_passed(self) -> bool:
+        return self.total > 0 and self.first_failure is None
+
+    @property
+    def summary(self) -> str:
+        """'no tests ran', 'all passed' or the first failure's message."""
+        if not self.total:
+            return "no tests ran"
+        return "all passed" if self.first_failure is None else self.first_failure
+
+
+def chapter_score(results, number: int) -> Score:
+    """The score of chapter ``number`` in ``results`` (the supervisor's Results, in the order the tests ran)."""
+    mine = [r for r in results if r.chapter == number]
+    first_failure = next((r.message for r in mine if r.outcome != "passed"), None)
+    return Score(sum(r.outcome == "passed" for r in mine), len(mine), first_failure)
+
+
 def scoreboard(results, numbers) -> tuple[list[str], bool]:
+    """One line per chapter (tests passed/run and the first failure) and a total; and whether every test passed."""
     lines, all_passed = [], True
     width = max(len(chapter_title(n)) for n in numbers)
     total_passed = total = 0
     for number in numbers:
-        mine = [r for r in results if r.chapter == number]
-        passed = sum(r.outcome == "passed" for r in mine)
-        total_passed, total = total_passed + passed, total + len(mine)
-        first_failure = next((r for r in mine if r.outcome != "passed"), None)
-        if not mine:
-            comment = "no tests ran"
-        elif first_failure is None:
-            comment = "all passed"
-        else:
-            comment = first_failure.message
-        if not mine or first_failure is not None:
-            all_passed = False
-        score = f"{passed}/{len(mine)}"
-        lines.append(f"{chapter_title(number):<{width}}  {score:>7}  {comment}")
+        score = chapter_score(results, number)
+        total_passed, total = total_passed + score.passed, total + score.total
+        all_passed = all_passed and score.all_passed
+        lines.append(f"{chapter_title(number):<{width}}  {f'{score.passed}/{score.total}':>7}  {score.summary}")
     lines.append(f"{'total':<{width}}  {f'{total_passed}/{total}':>7}")
     return lines, all_passed and total > 0
 
