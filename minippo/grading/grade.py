@@ -27,16 +27,9 @@ from pathlib import Path
 from minippo.errors import MinippoError
 from minippo.grading.chapters import chapter_files, chapter_title, chapters_to_grade
 from minippo.grading.gradescope import gradescope_results
-from minippo.grading.reports import (
-    CSV_FIELDS,
-    chapter_score,
-    csv_cell,
-    failures_in_detail,
-    integrity_notes,
-    scoreboard,
-    write_fresh,
-)
+from minippo.grading.reports import CSV_FIELDS, chapter_score, csv_cell, failures_in_detail, integrity_notes, scoreboard
 from minippo.grading.supervisor import IMPL_VARIABLE, RUN_LIMIT_S, run_tests
+from minippo.records import write_atomically
 
 
 def _require_pytest_timeout() -> None:
@@ -99,7 +92,8 @@ def grade(
             print(f"integrity: {chapter_title(number)}: {text}", file=out)
     if gradescope is not None:
         report = gradescope_results(results, numbers, integrity, time.monotonic() - started)
-        write_fresh(Path(gradescope).expanduser(), json.dumps(report, indent=1))
+        text = json.dumps(report, indent=1)
+        write_atomically(Path(gradescope).expanduser(), lambda handle: handle.write(text.encode("utf-8")))
         print(f"Wrote the results to {gradescope}.", file=out)
     if verbose and not all_passed:
         print("", file=out)
@@ -165,6 +159,6 @@ def grade_class(
         writer = csv.DictWriter(table, fieldnames=CSV_FIELDS)
         writer.writeheader()
         writer.writerows(rows)
-        write_fresh(Path(csv_path).expanduser(), table.getvalue())
+        write_atomically(Path(csv_path).expanduser(), lambda handle: handle.write(table.getvalue().encode("utf-8")))
         print(f"Wrote {len(rows)} rows to {csv_path}.", file=out)
     return 0

@@ -8,6 +8,7 @@ from pathlib import Path
 from minippo.errors import MinippoError
 from minippo.grading.chapters import chapter_title, chapters_to_grade
 from minippo.grading.reports import chapter_score, integrity_notes
+from minippo.records import write_atomically
 
 
 def gradescope_results(results, numbers, integrity: dict, seconds: float) -> dict:
@@ -76,9 +77,13 @@ def autograder_zip(path: str, repo: str, commit: str, chapter: str | None = None
     run = RUN_AUTOGRADER.format(
         python=python or "/autograder/venv/bin/python", chapter=f"{number} " if number is not None else ""
     )
-    with zipfile.ZipFile(target, "w") as archive:
-        for name, text in (("setup.sh", SETUP_SH.format(repo=repo, commit=commit)), ("run_autograder", run)):
-            info = zipfile.ZipInfo(name)
-            info.external_attr = 0o755 << 16
-            archive.writestr(info, text)
+
+    def write(handle) -> None:
+        with zipfile.ZipFile(handle, "w") as archive:
+            for name, text in (("setup.sh", SETUP_SH.format(repo=repo, commit=commit)), ("run_autograder", run)):
+                info = zipfile.ZipInfo(name)
+                info.external_attr = 0o755 << 16
+                archive.writestr(info, text)
+
+    write_atomically(target, write)
     return 0

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import NamedTuple
 
 from minippo.grading.chapters import chapter_title
@@ -62,15 +61,6 @@ def failures_in_detail(results, numbers) -> list[str]:
 def integrity_notes(integrity: dict, number: int) -> list[str]:
     """What the instructor should know of one chapter's submission: its own notes and the log's."""
     return integrity.get(number, []) + integrity.get("log", [])
-
-
-def write_fresh(path: Path, text: str) -> None:
-    """Write ``text`` to a new file at ``path``: whatever stood there (a link a submission left, say) is removed
-    first, so the file written is the grader's own."""
-    if path.is_symlink() or path.is_file():
-        path.unlink()
-    with open(path, "x", encoding="utf-8", newline="") as handle:
-        handle.write(text)
 
 
 def csv_cell(value) -> str:
