@@ -173,7 +173,7 @@ def test_csv_cells_are_one_line_and_never_formulas():
     assert reports.csv_cell("clip_fraction: fine") == "clip_fraction: fine"
 
 
-# the worker itself: only data crosses, the judge's objects are reached through what EXPOSED allows
+# the worker itself: only data crosses, the judge's objects are reached through what their classes offer
 
 
 def make_folder(tmp_path: Path, code: str, chapter: str = "ch05_clipping") -> Path:
@@ -205,7 +205,7 @@ def test_arrays_and_scalars_cross_with_their_dtype_and_in_place_changes_come_bac
         box.close()
 
 
-def test_the_worker_reaches_only_the_exposed_attributes_of_the_judge_s_objects(tmp_path):
+def test_the_worker_reaches_only_the_offered_attributes_of_the_judge_s_objects(tmp_path):
     folder = make_folder(
         tmp_path,
         """
@@ -234,7 +234,7 @@ def test_the_worker_reaches_only_the_exposed_attributes_of_the_judge_s_objects(t
         box.close()
 
 
-def test_the_worker_calls_a_judge_object_itself_only_where_exposed_lists_call(tmp_path):
+def test_the_worker_calls_a_judge_object_itself_only_where_its_class_offers_call(tmp_path):
     folder = make_folder(
         tmp_path,
         """
@@ -245,7 +245,9 @@ def test_the_worker_calls_a_judge_object_itself_only_where_exposed_lists_call(tm
     )
     from minippo.ppo import Config
 
-    class WatchedNormalizer:  # chapter 10's normaliser, which EXPOSED lists with __call__
+    class WatchedNormalizer:  # chapter 10's normaliser, called as a function
+        offered_to_graded_code = ("__call__",)
+
         def __init__(self):
             self.seen = []
 
