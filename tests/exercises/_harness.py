@@ -35,6 +35,7 @@ import numpy as np
 import pytest
 
 from minippo.gradcheck import central_differences
+from minippo.grading.plugin import plain_exception
 
 ROOT = Path(__file__).resolve().parents[2]
 IMPL_VARIABLE = "MINIPPO_IMPL"
@@ -53,6 +54,7 @@ def chapter_of(module_name: str) -> str:
     return module_name.rsplit(".", 1)[-1].removeprefix("test_")
 
 
+@plain_exception
 class StudentError(Exception):
     """A function under test raised; the message says which one and what it raised."""
 
