@@ -75,10 +75,12 @@ def test_importing_minippo_sets_no_environment_variable_and_no_thread_limit():
         "import os, numpy, gymnasium, mujoco, matplotlib.pyplot, tqdm, threadpoolctl;"  # what they set themselves
         "from threadpoolctl import threadpool_info; before = dict(os.environ);"
         "threads = [p['num_threads'] for p in threadpool_info()]; import minippo, minippo.envs, minippo.cli;"
+        "import minippo.grading.grade, minippo.grading.plugin, minippo.grading.sandbox;"
         "assert dict(os.environ) == before, set(os.environ) ^ set(before);"
         "assert [p['num_threads'] for p in threadpool_info()] == threads"
     )
-    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(ROOT)}
+    # the grader's pytest plugin takes its key out of the environment when pytest configures it, not on import
+    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(ROOT), "MINIPPO_GRADE_KEY": "a key"}
     result = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
 

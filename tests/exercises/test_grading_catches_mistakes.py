@@ -19,7 +19,8 @@ import numpy as np
 import pytest
 from make_exercises import SOLUTIONS, exercise_names, expected_exercises
 
-from minippo.grade import chapter_files, run_tests
+from minippo.grading.chapters import chapter_files
+from minippo.grading.supervisor import run_tests
 
 pytestmark = pytest.mark.skipif(
     _harness.implementation() != "solutions", reason="checks the grading tests themselves, not an implementation"
