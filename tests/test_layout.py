@@ -2,6 +2,7 @@
 file or page edits sys.path to reach another, and importing minippo changes nothing in the process."""
 
 import ast
+import importlib.util
 import subprocess
 import sys
 from pathlib import Path
@@ -91,3 +92,19 @@ def test_one_version_string():
     text = (ROOT / "pyproject.toml").read_text()
     assert 'dynamic = ["version"]' in text and "minippo.__version__" in text
     assert minippo.__version__.count(".") == 2
+
+
+def test_the_package_map_in_docs_is_the_package_as_it_is():
+    result = subprocess.run([sys.executable, str(ROOT / "tools" / "package_map.py"), "--check"], capture_output=True)
+    assert result.returncode == 0, result.stdout.decode() + result.stderr.decode()
+
+
+def test_the_core_imports_nothing_of_the_grader_the_language_models_or_the_toys():
+    spec = importlib.util.spec_from_file_location("package_map", ROOT / "tools" / "package_map.py")
+    package_map = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(package_map)
+    modules = package_map.modules()
+    for name, path in modules.items():
+        if package_map.room(name) in ("core", "library") and name != "cli":  # the command line opens every room
+            rooms = {package_map.room(target) for target in package_map.imports(path, set(modules))}
+            assert rooms <= {"core", "library"}, (name, rooms)
