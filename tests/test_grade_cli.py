@@ -134,6 +134,7 @@ BROKEN = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_broken_student_code_fails_its_tests_and_never_stops_the_grader(tmp_path):
     for name, source in BROKEN.items():
@@ -195,6 +196,7 @@ CLASS = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_grade_a_class_to_one_csv(tmp_path):
     for name, source in CLASS.items():

@@ -128,6 +128,7 @@ def graded(tmp_path_factory):
     return {row["student"]: row for row in rows}, result.stdout
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(900)
 @pytest.mark.parametrize("cheat", list(CHEATS))
 def test_a_cheat_scores_no_more_than_the_stubs_or_is_flagged(graded, cheat):
@@ -453,6 +454,7 @@ def test_with_namespaces_the_repository_and_the_class_are_not_there_at_all(tmp_p
         box.close()
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(1800)
 def test_the_right_variants_keep_their_full_score_through_the_worker(tmp_path):
     """The first other correct way of writing each chapter's exercises (tests/exercises/right/), laid out as a

@@ -106,6 +106,7 @@ def test_every_grading_test_fails_against_the_untouched_stubs(tmp_path):
     )
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(900)
 def test_every_wrong_variant_fails_at_least_one_grading_test():
     expected = {(chapter, name) for chapter in exercises_by_chapter() for name in variants_of(chapter)}
@@ -140,6 +141,7 @@ def test_every_wrong_variant_fails_at_least_one_grading_test():
     assert not unnamed, "first failures that do not name the mistake:\n" + "\n".join(unnamed)
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_no_right_variant_is_rejected():
     files = [chapter_files()[n] for n in sorted(chapter_files())]
