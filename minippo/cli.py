@@ -299,7 +299,8 @@ def sweep_file_words(line: str) -> list[str]:
 
 
 def cmd_grade(args) -> int:
-    from minippo.grade import autograder_zip, grade, grade_class
+    from minippo.grading.grade import grade, grade_class
+    from minippo.grading.gradescope import autograder_zip
 
     if args.class_folder is not None:
         if args.solutions:

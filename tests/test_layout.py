@@ -2,6 +2,7 @@
 file or page edits sys.path to reach another, and importing minippo changes nothing in the process."""
 
 import ast
+import importlib.util
 import subprocess
 import sys
 from pathlib import Path
@@ -75,10 +76,12 @@ def test_importing_minippo_sets_no_environment_variable_and_no_thread_limit():
         "import os, numpy, gymnasium, mujoco, matplotlib.pyplot, tqdm, threadpoolctl;"  # what they set themselves
         "from threadpoolctl import threadpool_info; before = dict(os.environ);"
         "threads = [p['num_threads'] for p in threadpool_info()]; import minippo, minippo.envs, minippo.cli;"
+        "import minippo.grading.grade, minippo.grading.plugin, minippo.grading.sandbox;"
         "assert dict(os.environ) == before, set(os.environ) ^ set(before);"
         "assert [p['num_threads'] for p in threadpool_info()] == threads"
     )
-    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(ROOT)}
+    # the grader's pytest plugin takes its key out of the environment when pytest configures it, not on import
+    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(ROOT), "MINIPPO_GRADE_KEY": "a key"}
     result = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
 
@@ -89,3 +92,19 @@ def test_one_version_string():
     text = (ROOT / "pyproject.toml").read_text()
     assert 'dynamic = ["version"]' in text and "minippo.__version__" in text
     assert minippo.__version__.count(".") == 2
+
+
+def test_the_package_map_in_docs_is_the_package_as_it_is():
+    result = subprocess.run([sys.executable, str(ROOT / "tools" / "package_map.py"), "--check"], capture_output=True)
+    assert result.returncode == 0, result.stdout.decode() + result.stderr.decode()
+
+
+def test_the_core_imports_nothing_of_the_grader_the_language_models_or_the_toys():
+    spec = importlib.util.spec_from_file_location("package_map", ROOT / "tools" / "package_map.py")
+    package_map = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(package_map)
+    modules = package_map.modules()
+    for name, path in modules.items():
+        if package_map.room(name) in ("core", "library") and name != "cli":  # the command line opens every room
+            rooms = {package_map.room(target) for target in package_map.imports(path, set(modules))}
+            assert rooms <= {"core", "library"}, (name, rooms)

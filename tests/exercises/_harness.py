@@ -9,10 +9,10 @@ The implementation is chosen by the environment variable MINIPPO_IMPL:
   the tests accept any correct implementation, not only the reference's way;
 - a folder path: a folder holding chNN_*.py modules with the same functions (a copy of exercises/ elsewhere).
 
-A student's code (``exercises`` or a folder) never runs in this process: ``load_student`` starts a worker process
-for it (minippo.sandbox), and RemoteStudent sends each call there and brings back only the result, so the tests, their
-verdict and the grader's log stay out of its reach. The course's own code runs here: the variants always, the
-reference unless MINIPPO_GRADE_ISOLATION=worker (``none`` runs a student's code here too, to debug the tests).
+A student's code (``exercises`` or a folder) never runs in this process: ``load_student`` starts a worker process for it
+(minippo.grading.sandbox), and RemoteStudent sends each call there and brings back only the result, so the tests, their
+verdict and the grader's log stay out of its reach. The course's own code runs here: the variants always, the reference
+unless MINIPPO_GRADE_ISOLATION=worker (``none`` runs a student's code here too, to debug the tests).
 
 Test modules import the ``student`` fixture and ``pytest_generate_tests`` from here. (A conftest.py in this folder
 would take the module name ``conftest`` from tests/conftest.py, which other tests import helpers from.)
@@ -35,6 +35,7 @@ import numpy as np
 import pytest
 
 from minippo.gradcheck import central_differences
+from minippo.grading.plugin import plain_exception
 
 ROOT = Path(__file__).resolve().parents[2]
 IMPL_VARIABLE = "MINIPPO_IMPL"
@@ -53,6 +54,7 @@ def chapter_of(module_name: str) -> str:
     return module_name.rsplit(".", 1)[-1].removeprefix("test_")
 
 
+@plain_exception
 class StudentError(Exception):
     """A function under test raised; the message says which one and what it raised."""
 
@@ -241,8 +243,8 @@ class RemoteStudent:
 
     def _report(self) -> None:
         """Pass the worker's new integrity notes to the grader's log, as notes of this chapter."""
-        from minippo.grade import log_integrity
-        from minippo.sandbox import answer_note
+        from minippo.grading.plugin import log_integrity
+        from minippo.grading.sandbox import answer_note
 
         for note in self._sandbox.take_notes():
             note = answer_note(note, self._chapter)
@@ -263,7 +265,7 @@ class RemoteStudent:
     def __getattr__(self, name):
         if name.startswith("__"):
             raise AttributeError(name)
-        from minippo.sandbox import StudentRaised, WorkerDied
+        from minippo.grading.sandbox import StudentRaised, WorkerDied
 
         try:
             sandbox = self._ready()
@@ -309,8 +311,8 @@ _sandboxes: dict[Path, object] = {}  # one worker per student folder, for all it
 
 
 def _load_isolated(chapter: str, folder: Path, where: str):
-    from minippo.grade import LOG_VARIABLE, log_integrity
-    from minippo.sandbox import Sandbox, WorkerDied, scan_source
+    from minippo.grading.plugin import LOG_VARIABLE, log_integrity
+    from minippo.grading.sandbox import Sandbox, WorkerDied, scan_source
 
     if folder not in _sandboxes:
         hide = [p for p in os.environ.get(HIDE_VARIABLE, "").split(os.pathsep) if p]

@@ -301,6 +301,9 @@ def test_loss_and_grad_matches_the_definition_and_finite_differences(student, ki
 class RecordingSGD:
     """An optimizer that remembers every gradient it was given and takes a plain gradient step."""
 
+    # what a student's code, in the grader's worker process, may reach of it (minippo.grading.sandbox.offers)
+    offered_to_graded_code = ("step", "lr", "params", "received")
+
     def __init__(self, params, lr=1e-3):
         self.params, self.lr, self.received = params, lr, []
 
@@ -480,6 +483,8 @@ class SnapshotPolicy:
     is made, as minippo's Rollout.collect draws them (uniforms (T, N) for a categorical policy, standard normals
     (T, N, act_dim) for a Gaussian), and its t-th sample call uses step t's."""
 
+    offered_to_graded_code = ("sample", "log_prob", "value")
+
     def __init__(self, agent, rng, horizon, num_envs, log=None):
         self.agent, self.horizon, self.num_envs = agent, horizon, num_envs
         self.log = [] if log is None else log
@@ -568,6 +573,8 @@ class ScriptedEnv:
 class WatchedEnv:
     """An environment as the graded code sees it: step and reset, each call written to the shared log."""
 
+    offered_to_graded_code = ("step", "reset")
+
     def __init__(self, env, index, log):
         self.env, self.index, self.log = env, index, log
 
@@ -583,6 +590,8 @@ class WatchedEnv:
 class WatchedNormalizer:
     """An ObservationNormalizer as the graded code sees it: calling it normalises, update folds raw observations into
     its statistics; both are written to the shared log."""
+
+    offered_to_graded_code = ("__call__", "update")
 
     def __init__(self, normalizer, log):
         self.normalizer, self.log = normalizer, log

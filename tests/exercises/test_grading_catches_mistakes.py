@@ -19,7 +19,8 @@ import numpy as np
 import pytest
 from make_exercises import SOLUTIONS, exercise_names, expected_exercises
 
-from minippo.grade import chapter_files, run_tests
+from minippo.grading.chapters import chapter_files
+from minippo.grading.supervisor import run_tests
 
 pytestmark = pytest.mark.skipif(
     _harness.implementation() != "solutions", reason="checks the grading tests themselves, not an implementation"
@@ -105,6 +106,7 @@ def test_every_grading_test_fails_against_the_untouched_stubs(tmp_path):
     )
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(900)
 def test_every_wrong_variant_fails_at_least_one_grading_test():
     expected = {(chapter, name) for chapter in exercises_by_chapter() for name in variants_of(chapter)}
@@ -139,6 +141,7 @@ def test_every_wrong_variant_fails_at_least_one_grading_test():
     assert not unnamed, "first failures that do not name the mistake:\n" + "\n".join(unnamed)
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_no_right_variant_is_rejected():
     files = [chapter_files()[n] for n in sorted(chapter_files())]

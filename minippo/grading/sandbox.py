@@ -1,4 +1,4 @@
-"""The judge's side of grading a student's module in a worker process (minippo/worker.py).
+"""The judge's side of grading a student's module in a worker process (minippo/grading/worker.py).
 
 ``Sandbox(folder, chapter)`` copies the student's folder and minippo into a private temporary folder and starts
 ``python -I worker.py`` there, with the process limits below (CPU seconds, address space, file size, processes) and,
@@ -7,8 +7,8 @@ repository, the class folder and the grader's files are covered by empty file sy
 dropped. ``call(name, args, kwargs)`` runs one of the module's functions there and returns its result; the tests that
 judge it, their verdict and the grader's log never leave this process.
 
-What the worker may reach of the judge's objects (an agent, an optimizer, a config) is listed in EXPOSED: the named
-attributes and methods, nothing that starts with ``_``. Arrays it reads from them are mirrored: a change it makes in
+What the worker may reach of the judge's objects (an agent, an optimizer, a config) is what their classes offer (see
+``offers``), nothing that starts with ``_``. Arrays it reads from them are mirrored: a change it makes in
 place (``agent.grads *= s``) is written back here before the judge acts on its next request, and a change made here
 (``agent.backward`` writing ``agent.grads``) is sent to it with every answer.
 """
@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import ast
 import atexit
+import dataclasses
 import functools
 import inspect
 import os
@@ -30,10 +31,15 @@ from pathlib import Path
 
 import numpy as np
 
-from minippo.worker import WireError, arrays_in, pack, read_frame, unpack, write_frame
+from minippo.agent import ActorCritic
+from minippo.config import Config
+from minippo.distributions import Categorical, DiagGaussian
+from minippo.grading.chapters import course
+from minippo.grading.worker import WireError, arrays_in, pack, read_frame, unpack, write_frame
+from minippo.network import MLP
+from minippo.optimizer import Adam
 
-PACKAGE = Path(__file__).resolve().parent
-ROOT = PACKAGE.parent
+PACKAGE = Path(__file__).resolve().parents[1]  # minippo, copied whole for the worker
 LIMITS = {
     "cpu_s": 900,  # the whole worker (one chapter), far above what the per-test time limits allow
     "memory_bytes": 4 << 30,  # address space
@@ -44,26 +50,11 @@ LIMITS = {
 STUDENT_FOLDER_BYTES = 20 << 20  # a student's folder larger than this is not copied whole
 MAX_NOTES = 50
 
-# the judge's objects the worker may use, by class name: the attributes and methods it may read or call ("*": every
-# attribute that is not callable, as for a config; "__call__": the object itself may be called); anything else
-# crosses as a handle it can only pass back
-EXPOSED = {
-    "ActorCritic": {"forward", "backward", "distribution", "policy_output", "value", "params", "grads", "log_std",
-                    "grad_log_std", "kind", "obs_dim", "act_dim", "hidden_sizes", "shared", "nets"},
-    "MLP": {"forward", "backward", "W", "b", "grad_W", "grad_b", "params", "grads", "sizes"},
-    "Categorical": {"logits", "log_probs", "probs", "log_prob", "log_prob_backward", "entropy", "entropy_backward",
-                    "kl", "kl_backward", "mode"},
-    "DiagGaussian": {"mean", "log_std", "std", "log_prob", "log_prob_backward", "entropy", "entropy_backward", "kl",
-                     "kl_backward", "mode"},
-    "Adam": {"step", "lr", "params", "m", "v", "t", "beta1", "beta2", "eps", "bias_correction"},
-    "RecordingSGD": {"step", "lr", "params", "received"},
-    # chapter 10's rollout: the snapshot policy, the environments and the normaliser (called as a function) it is given
-    "SnapshotPolicy": {"sample", "log_prob", "value"},
-    "WatchedEnv": {"step", "reset"},
-    "WatchedNormalizer": {"__call__", "update"},
-    "Generator": {"permutation", "shuffle", "integers", "random", "normal", "uniform", "choice", "standard_normal"},
-    "Config": "*",
-}  # fmt: skip
+# the judge's objects whose classes offer graded code every public attribute and method they have (a dataclass, a
+# config: its data, no method): minippo's agent, networks, distributions, optimizer and config, and NumPy's generator
+OPEN_TYPES = (ActorCritic, MLP, Categorical, DiagGaussian, Adam, Config, np.random.Generator)
+# any other class offers what it lists under this name (the tests' stand-ins do), "__call__" for the object itself
+OFFERED = "offered_to_graded_code"
 
 # the minippo functions and classes that are themselves the answer to a chapter's exercises: a submission may use
 # them (it runs), but the grade says so
@@ -87,8 +78,7 @@ LIBRARY_ANSWERS = {
                       "minippo.lm.dpo": ["dpo_loss", "dpo_loss_and_grad"]},
 }  # fmt: skip
 # what no submission needs: the reference, the tests, the grader
-FORBIDDEN_IMPORTS = ("solutions", "_harness", "pytest", "_pytest", "minippo.grade", "minippo.sandbox",
-                     "minippo.worker", "tests")  # fmt: skip
+FORBIDDEN_IMPORTS = ("solutions", "_harness", "pytest", "_pytest", "minippo.grading", "tests")
 
 
 class StudentRaised(Exception):
@@ -179,7 +169,7 @@ class Sandbox:
     def __init__(self, folder: Path, hide=(), limits: dict | None = None):
         self.folder = Path(folder)
         self.limits = dict(LIMITS, **(limits or {}))
-        self.hide = [Path(p) for p in (ROOT, *hide)]
+        self.hide = [Path(p) for p in (course().root, *hide)]
         self.isolation = isolation()
         self.notes: list[str] = []  # what the worker reported, in order; take_notes() hands out the new ones
         self._taken = 0
@@ -209,7 +199,7 @@ class Sandbox:
         run.mkdir()
         from_judge, to_worker = os.pipe()  # (read end, write end)
         from_worker, to_judge = os.pipe()
-        command = [sys.executable, "-I", str(lib / "minippo" / "worker.py"), str(from_judge), str(to_judge)]
+        command = [sys.executable, "-I", str(lib / "minippo" / "grading" / "worker.py"), str(from_judge), str(to_judge)]
         hidden = [str(p) for p in self._hidden()]
         if self.isolation == "namespaces":
             command = ["unshare", "--mount", "--pid", "--fork", "--kill-child", "--mount-proc", "sh", "-c",
@@ -390,19 +380,14 @@ class Sandbox:
             return self._objects[node["$j"]]
         raise WireError("a reference to an object the grader does not know")
 
-    def _allowed(self, value, name: str) -> bool:
-        if name.startswith("_"):
-            return False
-        allowed = EXPOSED.get(type(value).__name__)
-        if allowed == "*":
-            return not callable(getattr(value, name, None))
-        return allowed is not None and name in allowed
+    @staticmethod
+    def _allowed(value, name: str) -> bool:
+        return not name.startswith("_") and offers(value, name)
 
     @staticmethod
     def _allowed_call(value) -> bool:
         """Whether the worker may call the judge's object itself (an observation normaliser)."""
-        allowed = EXPOSED.get(type(value).__name__)
-        return isinstance(allowed, set) and "__call__" in allowed
+        return offers(value, "__call__")
 
     def _answer(self, header: dict, blobs: list) -> None:
         try:
@@ -534,6 +519,22 @@ class Sandbox:
             )
         except (ValueError, TypeError):
             return None
+
+
+def offers(value, name: str) -> bool:
+    """Whether the judge's object ``value`` offers graded code its attribute or method ``name`` ("__call__": the object
+    itself, to call): an object of OPEN_TYPES, whatever it has; any other, what its class lists under OFFERED (a test's
+    stand-in: ``offered_to_graded_code = ("step", "reset")``); nothing else crosses but as a handle."""
+    listed = getattr(type(value), OFFERED, None)
+    if listed is not None:
+        return name in listed
+    if not isinstance(value, OPEN_TYPES):
+        return False
+    if name == "__call__":
+        return callable(value)
+    if dataclasses.is_dataclass(value):
+        return not callable(getattr(value, name, None))
+    return hasattr(value, name)
 
 
 def _swap_arrays(value, aliases: dict, counter=None):

@@ -1,0 +1,90 @@
+"""The chapters ``minippo grade`` grades, and their names.
+
+The chapters are found, not listed: a chapter is graded when tests/exercises/test_chNN_<topic>.py exists, and its
+book name (``minippo grade the-min``) comes from book/NN-<name>.md. A new chapter needs only those two files.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+from minippo.errors import MinippoError
+
+
+@dataclass(frozen=True)
+class Course:
+    """Where the graded course's files are: its repository, the grading tests and the book's pages."""
+
+    root: Path
+
+    @property
+    def tests(self) -> Path:
+        return self.root / "tests" / "exercises"
+
+    @property
+    def book(self) -> Path:
+        return self.root / "book"
+
+
+def course() -> Course:
+    """The course: the repository minippo is installed from (``pip install -e .``), the one place the grading tests and
+    the book's pages are looked for. Raises MinippoError when it holds no grading tests (minippo from a wheel, say)."""
+    found = Course(Path(__file__).resolve().parents[2])
+    if not any(found.tests.glob("test_ch[0-9][0-9]_*.py")):
+        raise MinippoError(f"no grading tests found in {found.tests} (grade from the course's repository)")
+    return found
+
+
+def chapter_files() -> dict[int, Path]:
+    """{chapter number: its grading test file}."""
+    files = {}
+    for path in sorted(course().tests.glob("test_ch[0-9][0-9]_*.py")):
+        files[int(path.name[7:9])] = path
+    return files
+
+
+def book_names() -> dict[int, str]:
+    """{chapter number: the book page's name}, from book/NN-<name>.md, so that "minippo grade the-min" works as well as
+    "minippo grade 6"."""
+    return {int(page.name[:2]): page.stem[3:] for page in sorted(course().book.glob("[0-9][0-9]-*.md"))}
+
+
+def chapter_title(number: int) -> str:
+    path = chapter_files().get(number)
+    topic = path.stem[10:] if path else book_names().get(number, "")
+    return f"ch{number:02d} {topic.replace('_', ' ')}"
+
+
+def chapter_of_nodeid(nodeid: str) -> int:
+    match = re.search(r"test_ch(\d\d)_", nodeid)
+    return int(match.group(1)) if match else 0
+
+
+def resolve_chapter(text: str) -> int | None:
+    """'5', '05', 'ch05', 'clipping', 'ch05_clipping', 'the-min' -> 5; None if no chapter has that name."""
+    key = text.strip().lower().replace("-", "_").removesuffix(".py")
+    match = re.fullmatch(r"(?:ch(?:apter)?)?_?0*(\d+)(?:_\w*)?", key)
+    if match:
+        return int(match.group(1))
+    for number, path in chapter_files().items():
+        if key in (path.stem[10:], path.stem[5:]):
+            return number
+    for number, name in book_names().items():
+        if key == name.replace("-", "_"):
+            return number
+    return None
+
+
+def chapters_to_grade(chapter) -> list[int]:
+    """The chapter numbers to grade: ``chapter``'s, or every one if it is None; MinippoError for a bad name."""
+    files = chapter_files()
+    if chapter is None:
+        return sorted(files)
+    number = resolve_chapter(str(chapter))
+    if number is None or number not in files:
+        known = ", ".join(f"{n} ({chapter_title(n)[5:]})" for n in sorted(files))
+        why = f"chapter {number} has no exercise" if number in book_names() else f"unknown chapter '{chapter}'"
+        raise MinippoError(f"{why}; chapters with exercises: {known}")
+    return [number]
