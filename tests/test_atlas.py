@@ -7,7 +7,7 @@ import pytest
 
 import minippo.losses
 import minippo.ppo
-from benchmarks import atlas
+from benchmarks import atlas, atlas_signatures
 from minippo.distributions import DiagGaussian
 from minippo.ppo import Config, Trainer, compute_advantages
 from minippo.presets import CARTPOLE_PPO
@@ -145,13 +145,13 @@ def test_the_signature_rule_finds_the_variable_that_moved():
 
     def run(kl):
         n = 20
-        row = {name: 1.0 + 0.01 * rng.random(n) for name in atlas.VARIABLES}
+        row = {name: 1.0 + 0.01 * rng.random(n) for name in atlas_signatures.VARIABLES}
         row["approx_kl"] = kl * (1.0 + 0.1 * rng.random(n))
         row["return_mean"] = np.linspace(10.0, 100.0, n)
         return row
 
     runs = {("healthy", task, seed): run(0.01) for task in atlas.TASKS for seed in atlas.SEEDS}
     runs |= {("lr_10x", "Hopper-v5", seed): run(1.0) for seed in atlas.SEEDS}
-    (rule,) = atlas.signature_rules(runs)
+    (rule,) = atlas_signatures.signature_rules(runs)
     assert rule["rule"].split()[0].startswith("kl_") and rule["rule"].split()[1] == ">"
     assert rule["seeds_holding"] == "3/3" and rule["healthy_false_alarms"] == "0/9" and rule["verdict"] == "separated"
