@@ -91,8 +91,7 @@ def add_config_options(parser, skip=("env_id", "total_steps")) -> None:
 def settings_from_args(args) -> dict:
     """{field: value} of the fields a command sets: --preset's, then --config's, then each field's own option."""
     settings = dict(PRESETS[args.preset]) if getattr(args, "preset", None) else {}
-    default = Config()
-    settings |= {key: getattr(default.with_overrides([text]), key) for text in args.config for key in keys([text])}
+    settings |= Config.parse_overrides(args.config)
     given = {field.name: getattr(args, f"set_{field.name}", None) for field in dataclasses.fields(Config)}
     return settings | {key: value for key, value in given.items() if value is not None}
 

@@ -142,16 +142,21 @@ class Config:
         except ValueError:
             raise ConfigError(name, f"{name}: cannot read '{raw}' as {type_name(kind)}") from None
 
-    def with_overrides(self, texts) -> Config:
-        """A copy with 'key=value' overrides (``--config``, ``--grid``), each value read as its field's type says."""
+    @classmethod
+    def parse_overrides(cls, texts) -> dict:
+        """{field: value} of 'key=value' texts (``--config``), each value read as its field's type says."""
         changes = {}
         for text in texts:
             if "=" not in text:
                 raise ConfigError("", f"'{text}' is not key=value")
             key, raw = text.split("=", 1)
             key = key.strip().replace("-", "_")
-            changes[key] = self.parse_value(key, raw)
-        return dataclasses.replace(self, **changes)
+            changes[key] = cls.parse_value(key, raw)
+        return changes
+
+    def with_overrides(self, texts) -> Config:
+        """A copy with 'key=value' overrides (``--config``)."""
+        return dataclasses.replace(self, **self.parse_overrides(texts))
 
     def to_dict(self) -> dict:
         data = dataclasses.asdict(self)

@@ -41,8 +41,9 @@ def read_rows(path) -> list[dict]:
         return list(csv.DictReader(handle))
 
 
-def append_row(path, fields: list[str], row: dict) -> None:
-    """Append one row (the header first if the file is new), flushed to disk before returning."""
+def append_row(path, fields: list[str], row: dict, durable: bool = True) -> None:
+    """Append one row (the header first if the file is new), flushed to disk before returning unless ``durable`` is
+    false (progress.csv: a resumed run keeps only the rows up to its checkpoint, which is written durably)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     new = not path.exists() or path.stat().st_size == 0
@@ -51,8 +52,9 @@ def append_row(path, fields: list[str], row: dict) -> None:
         if new:
             writer.writeheader()
         writer.writerow({key: row.get(key, "") for key in fields})
-        handle.flush()
-        os.fsync(handle.fileno())
+        if durable:
+            handle.flush()
+            os.fsync(handle.fileno())
 
 
 def write_rows(path, fields: list[str], rows) -> None:

@@ -58,7 +58,7 @@ def start_folder(out: Path, trainer, resume: bool) -> list[dict]:
 def write_update(out: Path, trainer, row: dict, checkpoint: bool) -> None:
     """Append the update's row to progress.csv, then write the checkpoint when it is time for one."""
     with run_files(out, trainer):
-        append_row(out / "progress.csv", PROGRESS_FIELDS, csv_row(row))
+        append_row(out / "progress.csv", PROGRESS_FIELDS, csv_row(row), durable=False)
         if checkpoint:
             save_checkpoint(out, trainer)
 

@@ -93,7 +93,7 @@ def pytest_collection_modifyitems(config, items):
     named = config.args_source != pytest.Config.ArgsSource.TESTPATHS  # files or tests named on the command line
     if config.getoption("--all") or config.getoption("-m") or named:
         return
-    quick = [item for item in items if not any(item.get_closest_marker(tier) for tier in TIERS)]
-    if len(quick) < len(items):
-        config.hook.pytest_deselected(items=[item for item in items if item not in quick])
-        items[:] = quick
+    tiered = [any(item.get_closest_marker(tier) for tier in TIERS) for item in items]
+    if any(tiered):
+        config.hook.pytest_deselected(items=[item for item, t in zip(items, tiered) if t])
+        items[:] = [item for item, t in zip(items, tiered) if not t]
