@@ -103,3 +103,88 @@ def test_update_replaces_only_the_draws_it_runs(tmp_path):
     assert sorted({row["seed"] for row in rows}) == ["0", "1"]
     assert {row["claim"] for row in rows if row["seed"] == "1" and row["line"] == "15"} == {"assert draw < 5"}
     assert len(json.loads(out.with_suffix(".json").read_text())["runs"]) == 2
+
+
+MARGIN_PAGE = """\
+---
+kernelspec:
+  name: python3
+  display_name: Python 3
+jupytext:
+  text_representation:
+    format_name: myst
+---
+# Slack
+
+```{code-cell} ipython3
+import os
+
+import numpy as np
+
+draw = int(os.environ["BOOK_SEED"])
+values = np.array([1.0, 2.0, 3.0]) + draw
+assert 0.5 < values.min() < 100 and np.all(values > 0.25) and values.size == 3
+assert np.any(values > 2.5 + draw) and all(v < 50 for v in values)
+assert "text" != "other"
+```
+"""
+
+
+@pytest.mark.timeout(180)
+def test_each_ordered_comparison_records_its_slack_in_the_compared_units(tmp_path):
+    book = tmp_path / "book"
+    book.mkdir()
+    (book / "page.md").write_text(MARGIN_PAGE)
+    out = tmp_path / "claims.csv"
+    assert check_claims.main(["--book", str(book), "--seeds", "0,2", "--jobs", "1", "--out", str(out)]) == 0
+    rows = {(row["line"], row["seed"]): row for row in csv.DictReader(open(out, newline=""))}
+    # draw 2: values = 3, 4, 5. Atoms in source order: 0.5 < min, min < 100, all(values > 0.25); the == has none
+    assert json.loads(rows["18", "2"]["slacks"]) == {"0": 2.5, "1": 97.0, "2": 2.75}
+    assert float(rows["18", "2"]["margin"]) == pytest.approx(2.5 / 3)  # the tightest relative to its larger side
+    # any: the largest element's slack (5 - 4.5); all over a generator: the smallest (50 - 5)
+    assert json.loads(rows["19", "2"]["slacks"]) == {"0": 0.5, "1": 45.0}
+    assert rows["20", "0"]["slacks"] == "{}" and rows["20", "0"]["margin"] == ""
+
+
+def _rows(slacks, verdicts=None):
+    verdicts = verdicts or ["held"] * len(slacks)
+    return [
+        {
+            "page": "p",
+            "line": "1",
+            "claim": "assert x > 0",
+            "env": "",
+            "seed": str(seed),
+            "verdict": verdict,
+            "margin": "",
+            "slacks": json.dumps({"0": slack}),
+        }
+        for seed, (slack, verdict) in enumerate(zip(slacks, verdicts))
+    ]
+
+
+def test_a_claim_stands_only_when_its_slack_clears_the_prediction_bound():
+    steady = [1.0 + 0.01 * k for k in range(16)]  # mean 1.075, sd 0.048: 22 spreads
+    spread = [0.5 + (0.3 if k % 2 else -0.3) for k in range(16)]  # held on every draw, mean 0.5, sd 0.31: 1.6 spreads
+    (judged,) = check_claims.judge(_rows(steady))
+    assert judged["status"] == "stands" and judged["spreads"] > 20
+    (judged,) = check_claims.judge(_rows(spread))
+    assert judged["status"] == "thin" and 1.5 < judged["spreads"] < 1.7
+    (judged,) = check_claims.judge(_rows(steady, ["held"] * 15 + ["failed"]))
+    assert judged["status"] == "failed"
+    (judged,) = check_claims.judge(_rows(spread[:4]))  # too few draws to judge a spread: only the verdicts
+    assert judged["status"] == "held"
+    (judged,) = check_claims.judge(_rows([0.0] * 16))  # an exact claim that never moves (x <= 0 with x = 0)
+    assert judged["status"] == "stands" and judged["spreads"] is None
+    assert 3.8 < check_claims.needed_spreads(16) < 3.9 and 5.0 < check_claims.needed_spreads(8) < 5.1
+
+
+def test_report_judges_the_record_without_running_anything(tmp_path, capsys):
+    out = tmp_path / "claims.csv"
+    with open(out, "w", newline="") as handle:
+        writer = csv.DictWriter(handle, check_claims.FIELDS)
+        writer.writeheader()
+        writer.writerows(_rows([0.5 + (0.3 if k % 2 else -0.3) for k in range(16)]))
+    assert check_claims.main(["--report", "--out", str(out)]) == 1
+    printed = capsys.readouterr().out
+    assert "| thin |" in printed and "rule: held on all 16 draws and mean slack >= 3.85 sd" in printed

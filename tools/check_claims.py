@@ -1,22 +1,33 @@
-"""Execute the book's pages under several draws of their seeds, without Sphinx, and record which claim held on which.
+"""Execute the book's pages under several draws of their seeds, without Sphinx, and judge each claim by its margin.
 
-    python tools/check_claims.py                      # every page, BOOK_SEED = 0 … 7, both CPUs
+    python tools/check_claims.py                      # every page, BOOK_SEED = 0 … 15, both CPUs
     python tools/check_claims.py --seeds 3 --pages 11-mujoco 13-language-model
     python tools/check_claims.py --env OPENBLAS_CORETYPE=Sandybridge --seeds 0 --out /tmp/sandybridge.csv
+    python tools/check_claims.py --report             # judge the record's claims over its draws, running nothing
 
 A page's sentences about a live run are glued from its cells and each value-dependent word is asserted where it is
 glued: a claim is one ``assert`` statement of a page. The book refuses to build when one fails, so a build reports
 only the first failure of the first draw. Here every ``assert`` of every code cell is rewritten (with ``ast``) into a
 call that records whether its condition held and goes on, so one execution of a page under one seed gives the verdict
-of every claim on it. Pages are read as myst-nb reads them and run by the same executor as the book's ahead-of-time
-execution (``book/_ext/execute_ahead.py``), several at a time, each in a kernel of its own with ``BOOK_SEED`` set.
+of every claim on it, and each ordered comparison in it records its slack, how far it was from flipping
+(``tools/claim_runtime.py``). Pages are read as myst-nb reads them and run by the same executor as the book's
+ahead-of-time execution (``book/_ext/execute_ahead.py``), several at a time, each in a kernel of its own with
+``BOOK_SEED`` set.
+
+A claim that held on the draws run may still be fitted to them. So a claim *stands* only when it held on every draw
+and each comparison's slack, over the draws, keeps its mean at least ``needed_spreads(n)`` standard deviations above
+zero (3.85 for 16 draws): the one-sided 99.9 % prediction bound for a draw not yet run is then above zero. A claim
+that held everywhere but is closer than that is *thin*, and a page with a thin claim fails as one with a failed claim
+does. With fewer than eight draws only the verdicts are judged.
 
 The record (``--out``, default ``benchmarks/results/book_claims.csv``) has one row per claim and draw: the page, the
-claim's line in the page's source, its text, the seed, the environment, and ``held``, ``failed`` or ``not reached`` (a
-cell before it stopped with an error), with the command and commit of each run that made it in ``book_claims.json``
-beside it. ``--update`` replaces only the rows of the pages and draws it runs (a page changed since, another kernel).
-The closing table prints claims × seeds, failures first. The exit status is 1 when any claim failed or any page
-stopped with an error, 0 when every claim held on every draw.
+claim's line in the page's source, its text, the seed, the environment, the verdict (``held``, ``failed``, ``not
+reached`` after a cell stopped with an error, or ``error: …`` when the condition raised), the margin (the tightest
+comparison's slack relative to its larger side) and the slacks (JSON: comparison number → slack), with the command
+and commit of each run that made it in ``book_claims.json`` beside it. ``--update`` replaces only the rows of the
+pages and draws it runs (a page changed since, another kernel). The closing table prints claims × seeds, failures and
+thin claims first, then a line per page with its tightest claim. The exit status is 1 when any claim failed or is
+thin, or any page stopped with an error, 0 otherwise.
 """
 
 from __future__ import annotations
@@ -25,8 +36,10 @@ import argparse
 import ast
 import csv
 import json
+import math
 import os
 import platform
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -77,10 +90,66 @@ class _Recorder(ast.NodeTransformer):
         text = " ".join(ast.get_source_segment(self.source, node).split())
         self.claims.append({"key": key, "line": line, "text": text})
         condition = ast.Lambda(
-            args=ast.arguments(posonlyargs=[], args=[], kwonlyargs=[], kw_defaults=[], defaults=[]), body=node.test
+            args=ast.arguments(posonlyargs=[], args=[], kwonlyargs=[], kw_defaults=[], defaults=[]),
+            body=_Atoms().claim(node.test),
         )
         call = ast.Call(ast.Name(RECORDER, ast.Load()), [condition, ast.Constant(key)], [])
         return ast.copy_location(ast.Expr(call), node)
+
+
+_ALL_ANY = {"all": "min", "any": "max"}  # all(...), np.all(...), numpy.all(...), (...).all(); any likewise
+
+
+class _Atoms:
+    """Rewrites a claim's condition so that each ordered comparison of its conjunction records its slack
+    (tools/claim_runtime.py): it descends through ``and``, through ``all``/``any`` (as functions of NumPy or Python, or
+    as an array's methods; into a generator's element) and through chained comparisons, numbering the comparisons it
+    meets in the order of the source. What lies under ``or``, ``not`` or any other call is left as written."""
+
+    def __init__(self):
+        self.atoms = 0
+
+    def claim(self, test: ast.expr, reduce: str = "min") -> ast.expr:
+        if isinstance(test, ast.BoolOp) and isinstance(test.op, ast.And):
+            return ast.BoolOp(ast.And(), [self.claim(value, reduce) for value in test.values])
+        if isinstance(test, ast.Compare):
+            first, self.atoms = self.atoms, self.atoms + len(test.ops)
+            ops = ast.Tuple([ast.Constant(_OP_TEXT[type(op)]) for op in test.ops], ast.Load())
+            return ast.Call(
+                ast.Name(COMPARE, ast.Load()),
+                [ast.Constant(first), ast.Constant(reduce), ops, test.left, *test.comparators],
+                [],
+            )
+        if isinstance(test, ast.Call) and not test.keywords:
+            name = test.func.attr if isinstance(test.func, ast.Attribute) else getattr(test.func, "id", "")
+            is_method = isinstance(test.func, ast.Attribute) and not test.args  # (x > 0).all()
+            if name in _ALL_ANY and (len(test.args) == 1 or is_method):
+                inner = _ALL_ANY[name]
+                if is_method:
+                    receiver = self.claim(test.func.value, inner)
+                    return ast.Call(ast.Attribute(receiver, name, ast.Load()), [], [])
+                argument = test.args[0]
+                if isinstance(argument, (ast.GeneratorExp, ast.ListComp)):
+                    argument = type(argument)(self.claim(argument.elt, inner), argument.generators)
+                else:
+                    argument = self.claim(argument, inner)
+                return ast.Call(test.func, [argument], [])
+        return test
+
+
+COMPARE = "__claim_compare__"
+_OP_TEXT = {
+    ast.Lt: "<",
+    ast.LtE: "<=",
+    ast.Gt: ">",
+    ast.GtE: ">=",
+    ast.Eq: "==",
+    ast.NotEq: "!=",
+    ast.Is: "is",
+    ast.IsNot: "is not",
+    ast.In: "in",
+    ast.NotIn: "not in",
+}
 
 
 def instrument(page: Path, notebook) -> list[dict]:
@@ -93,16 +162,22 @@ def instrument(page: Path, notebook) -> list[dict]:
 
 
 def _prelude(log: Path) -> str:
-    return (
-        f"def {RECORDER}(condition, key, _path={str(log)!r}):\n"
-        "    import json\n"
-        "    try:\n"
-        "        verdict = 'held' if bool(condition()) else 'failed'\n"
-        "    except Exception as error:\n"
-        "        verdict = 'error: ' + type(error).__name__\n"
-        "    with open(_path, 'a', encoding='utf-8') as handle:\n"
-        "        handle.write(json.dumps({'key': key, 'verdict': verdict}) + '\\n')\n"
-    )
+    """The first cell of an instrumented page: tools/claim_runtime.py, writing to ``log``."""
+    runtime = (Path(__file__).resolve().parent / "claim_runtime.py").read_text(encoding="utf-8")
+    return runtime + f"\nCLAIMS_LOG = {str(log)!r}\n"
+
+
+def _combine(entries: list[dict]) -> dict:
+    """One claim's evaluations on one draw (several when a loop evaluates it) as one: it holds if it always held, and
+    each atom keeps its smallest slack."""
+    verdict = next((e["verdict"] for e in entries if e["verdict"] != "held"), "held")
+    slacks: dict[str, float | None] = {}
+    for entry in entries:
+        for atom, value in entry.get("slacks", {}).items():
+            known = slacks.get(atom)
+            slacks[atom] = value if known is None or (value is not None and value < known) else known
+    margins = [e["margin"] for e in entries if e.get("margin") is not None]
+    return {"verdict": verdict, "slacks": slacks, "margin": min(margins) if margins else None}
 
 
 def read_page(page: Path):
@@ -128,11 +203,10 @@ def run_page(page: Path, seed: int, env: dict[str, str], timeout: int) -> dict:
         started = time.monotonic()
         single_nb_execution(notebook, cwd=str(page.parent), allow_errors=True, timeout=timeout, meta_override=True)
         seconds = time.monotonic() - started
-        verdicts: dict[str, str] = {}
+        evaluations: dict[str, list[dict]] = {}
         for line in log.read_text(encoding="utf-8").splitlines():
             entry = json.loads(line)
-            if verdicts.get(entry["key"], "held") == "held":  # a claim evaluated in a loop holds if it always held
-                verdicts[entry["key"]] = entry["verdict"]
+            evaluations.setdefault(entry["key"], []).append(entry)
     errors = [
         f"{output.ename}: {output.evalue}".splitlines()[0][:160]
         for cell in notebook.cells
@@ -141,7 +215,10 @@ def run_page(page: Path, seed: int, env: dict[str, str], timeout: int) -> dict:
         if output.output_type == "error"
     ]
     for claim in claims:
-        claim["verdict"] = verdicts.get(claim["key"], "not reached")
+        if claim["key"] in evaluations:
+            claim.update(_combine(evaluations[claim["key"]]))
+        else:
+            claim.update(verdict="not reached", slacks={}, margin=None)
     return {"page": page.stem, "seed": seed, "claims": claims, "errors": errors, "seconds": seconds}
 
 
@@ -164,27 +241,130 @@ def commit() -> str:
     return head.stdout.strip() + ("+dirty" if dirty else "")
 
 
-def table(results: list[dict], columns: list[str]) -> str:
-    """Claims × draws as Markdown: ✓ held, ✗ failed, · not reached, ! its condition raised; failures first."""
+FIELDS = ["page", "line", "claim", "seed", "env", "verdict", "margin", "slacks"]
+FEWEST_DRAWS = 8  # below this many draws a claim's spread is not judged, only its verdicts
+COVERAGE = 0.999  # the one-sided prediction interval a claim's slack must clear on a draw not yet run
+
+
+def needed_spreads(draws: int) -> float:
+    """How many standard deviations of its spread a slack's mean over ``draws`` draws must be above 0: the one-sided
+    99.9 % prediction bound for the next draw, mean − t(0.999, n − 1) · s · √(1 + 1/n), is then above 0 (3.85 for 16
+    draws, 5.07 for 8). Under a normal spread, a claim just at the bound fails about one fresh draw in a thousand."""
+    from scipy.stats import t
+
+    return float(t.ppf(COVERAGE, draws - 1) * math.sqrt(1 + 1 / draws))
+
+
+def judge(rows: list[dict]) -> list[dict]:
+    """Each claim (page, line, text, env) over the draws in ``rows``: ``stands`` when it held on every draw and each of
+    its atoms' slack clears ``needed_spreads`` (an atom whose slack never moves clears it by holding), ``thin`` when it
+    held on every draw but some atom's spread leaves too little room, ``failed`` when some draw failed it, and ``held``
+    when it held on fewer than FEWEST_DRAWS draws, too few to judge a spread. ``spreads`` is the smallest over the
+    atoms of mean / standard deviation of the slack (None: no atom moved, or none is ordered)."""
+    claims: dict[tuple, dict] = {}
+    for row in rows:
+        key = (row["page"], int(row["line"]), row["claim"], row["env"])
+        claim = claims.setdefault(
+            key,
+            {
+                "page": row["page"],
+                "line": int(row["line"]),
+                "claim": row["claim"],
+                "env": row["env"],
+                "verdicts": {},
+                "slacks": {},
+                "margins": [],
+            },
+        )
+        claim["verdicts"][int(row["seed"])] = row["verdict"]
+        slacks = row["slacks"] if isinstance(row["slacks"], dict) else json.loads(row["slacks"] or "{}")
+        for atom, value in slacks.items():
+            claim["slacks"].setdefault(atom, []).append(value)
+        if row["margin"] not in (None, ""):
+            claim["margins"].append(float(row["margin"]))
+    judged = []
+    for claim in claims.values():
+        draws = len(claim["verdicts"])
+        held = all(v == "held" for v in claim["verdicts"].values())
+        spreads = None
+        for values in claim["slacks"].values():
+            if len(values) < draws or any(v is None for v in values):
+                continue  # not evaluated on some draw: the verdicts say it
+            mean, sd = statistics.fmean(values), statistics.stdev(values) if len(values) > 1 else 0.0
+            z = math.inf if sd == 0 else mean / sd
+            spreads = z if spreads is None else min(spreads, z)
+        if not held:
+            status = "failed"
+        elif draws < FEWEST_DRAWS:
+            status = "held"
+        else:
+            status = "thin" if spreads is not None and spreads < needed_spreads(draws) else "stands"
+        judged.append(
+            {
+                **claim,
+                "draws": draws,
+                "status": status,
+                "spreads": None if spreads == math.inf else spreads,
+                "smallest_margin": min(claim["margins"]) if claim["margins"] else None,
+            }
+        )
+    return sorted(judged, key=lambda c: (c["status"] in ("stands", "held"), c["page"], c["line"]))
+
+
+def table(judged: list[dict]) -> str:
+    """Claims × draws as Markdown, failures and thin margins first: ✓ held, ✗ failed, · not reached, ! its condition
+    raised; then the smallest relative margin over the draws, the slack's mean in standard deviations (∞: it never
+    moved; –: no ordered comparison) and the claim's status."""
     marks = {"held": "✓", "failed": "✗", "not reached": "·"}
-    rows: dict[str, dict] = {}
-    for result in results:
-        for claim in result["claims"]:
-            row = rows.setdefault(claim["key"], {"text": claim["text"], "page": result["page"], "line": claim["line"]})
-            row[result["column"]] = marks.get(claim["verdict"], "!")
-    ordered = sorted(
-        rows.items(), key=lambda kv: (all(kv[1].get(c) == "✓" for c in columns), kv[1]["page"], kv[1]["line"])
-    )
-    lines = ["| claim | " + " | ".join(columns) + " |", "|---|" + "---|" * len(columns)]
-    for key, row in ordered:
-        text = row["text"][:70].replace("|", "\\|")
-        lines.append(f"| `{key}` {text} | " + " | ".join(row.get(c, "") for c in columns) + " |")
+    seeds = sorted({seed for claim in judged for seed in claim["verdicts"]})
+    lines = [
+        "| claim | " + " | ".join(map(str, seeds)) + " | margin | mean/sd | status |",
+        "|---|" + "---|" * (len(seeds) + 3),
+    ]
+    for c in judged:
+        text = c["claim"][:70].replace("|", "\\|")
+        cells = [marks.get(c["verdicts"].get(seed, ""), "!" if seed in c["verdicts"] else "") for seed in seeds]
+        margin = "–" if c["smallest_margin"] is None else f"{c['smallest_margin']:.3g}"
+        spreads = "–" if not c["slacks"] else ("∞" if c["spreads"] is None else f"{c['spreads']:.3g}")
+        lines.append(
+            f"| `{c['page']}:{c['line']}` {text} | " + " | ".join(cells) + f" | {margin} | {spreads} | {c['status']} |"
+        )
     return "\n".join(lines)
+
+
+def summary(judged: list[dict]) -> str:
+    """A line per page: its claims by status, and its tightest claim in spreads; then the rule."""
+    lines = []
+    for page in sorted({c["page"] for c in judged}):
+        mine = [c for c in judged if c["page"] == page]
+        counts = {s: sum(c["status"] == s for c in mine) for s in ("stands", "held", "thin", "failed")}
+        finite = [c for c in mine if c["spreads"] is not None]
+        tightest = min(finite, key=lambda c: c["spreads"]) if finite else None
+        lines.append(
+            f"{page}: "
+            + ", ".join(f"{n} {s}" for s, n in counts.items() if n)
+            + (f"; tightest {tightest['spreads']:.2f} sd (line {tightest['line']})" if tightest else "")
+        )
+    draws = max((c["draws"] for c in judged), default=0)
+    if draws >= FEWEST_DRAWS:
+        lines.append(f"rule: held on all {draws} draws and mean slack >= {needed_spreads(draws):.2f} sd")
+    return "\n".join(lines)
+
+
+def read_record(path: Path) -> list[dict]:
+    with open(path, newline="", encoding="utf-8") as handle:
+        rows = list(csv.DictReader(handle))
+    for row in rows:  # a record from before slacks were kept
+        row.setdefault("margin", "")
+        row.setdefault("slacks", "")
+        row["margin"] = row["margin"] or ""
+        row["slacks"] = row["slacks"] or ""
+    return rows
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seeds", default="0-7", help="the draws, as BOOK_SEED values: 0-7, or 0,3,5 (default 0-7)")
+    parser.add_argument("--seeds", default="0-15", help="the draws, as BOOK_SEED values: 0-15, or 0,3,5 (default 0-15)")
     parser.add_argument("--pages", nargs="*", help="page names (e.g. 11-mujoco); default every page with code")
     parser.add_argument(
         "--env",
@@ -200,12 +380,23 @@ def main(argv=None) -> int:
     parser.add_argument(
         "--update", action="store_true", help="replace only these pages' and draws' rows of --out, keep the others"
     )
+    parser.add_argument(
+        "--report", action="store_true", help="run nothing: judge the claims of --out (of --pages) over its draws"
+    )
     args = parser.parse_args(argv)
     try:
         seeds = seeds_from(args.seeds)
         env = dict(item.split("=", 1) for item in args.env)
     except ValueError:
-        parser.error("--seeds takes integers such as 0-7 or 0,3,5, and --env takes NAME=VALUE")
+        parser.error("--seeds takes integers such as 0-15 or 0,3,5, and --env takes NAME=VALUE")
+    if args.report:
+        if not args.out.exists():
+            parser.error(f"no record at {args.out}")
+        rows = [r for r in read_record(args.out) if not args.pages or r["page"] in args.pages]
+        judged = judge(rows)
+        print(table(judged))
+        print(summary(judged))
+        return 0 if all(c["status"] in ("stands", "held") for c in judged) else 1
     pages = executable_pages(args.book)
     if args.pages:
         unknown = set(args.pages) - {p.stem for p in pages}
@@ -215,9 +406,6 @@ def main(argv=None) -> int:
     label = ",".join(f"{k}={v}" for k, v in env.items())
     started_at = commit()  # the code the pages run, read before they run
 
-    def column(seed: int) -> str:
-        return f"{seed} {label}".strip()
-
     # the longest pages first, so that the last to finish is a short one
     jobs = sorted(((p, s) for s in seeds for p in pages), key=lambda job: -job[0].stat().st_size)
     results = []
@@ -225,7 +413,6 @@ def main(argv=None) -> int:
         futures = {pool.submit(run_page, page, seed, env, args.timeout): (page, seed) for page, seed in jobs}
         for future in as_completed(futures):
             result = future.result()
-            result["column"] = column(result["seed"])
             results.append(result)
             counts = {}
             for claim in result["claims"]:
@@ -237,25 +424,34 @@ def main(argv=None) -> int:
                 flush=True,
             )
     results.sort(key=lambda r: (r["page"], r["seed"]))
-    header = ["page", "line", "claim", "seed", "env", "verdict"]
     rows = [
-        [result["page"], claim["line"], claim["text"], result["seed"], label, claim["verdict"]]
+        {
+            "page": result["page"],
+            "line": claim["line"],
+            "claim": claim["text"],
+            "seed": result["seed"],
+            "env": label,
+            "verdict": claim["verdict"],
+            "margin": "" if claim["margin"] is None else f"{claim['margin']:.6g}",
+            "slacks": json.dumps({a: (None if v is None else float(f"{v:.6g}")) for a, v in claim["slacks"].items()}),
+        }
         for result in results
         for claim in result["claims"]
     ]
     runs = []
     if args.update and args.out.exists():  # keep the other pages' and draws' rows, and the runs that made them
         ran = {(r["page"], str(r["seed"]), label) for r in results}
-        with open(args.out, newline="", encoding="utf-8") as handle:
-            kept = [row for row in csv.reader(handle)][1:]
-        rows = [row for row in kept if (row[0], row[3], row[4]) not in ran] + rows
+        kept = [row for row in read_record(args.out) if (row["page"], row["seed"], row["env"]) not in ran]
+        rows = kept + rows
         about_path = args.out.with_suffix(".json")
         if about_path.exists():
             runs = json.loads(about_path.read_text(encoding="utf-8")).get("runs", [])
-    rows.sort(key=lambda row: (row[4], row[0], int(row[3]), int(row[1])))
+    rows.sort(key=lambda row: (row["env"], row["page"], int(row["seed"]), int(row["line"])))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     with open(args.out, "w", newline="", encoding="utf-8") as handle:
-        csv.writer(handle).writerows([header, *rows])
+        writer = csv.DictWriter(handle, FIELDS)
+        writer.writeheader()
+        writer.writerows(rows)
     runs.append(
         {
             "command": "python tools/check_claims.py " + " ".join(argv if argv is not None else sys.argv[1:]),
@@ -263,13 +459,20 @@ def main(argv=None) -> int:
             "date": time.strftime("%Y-%m-%d"),
             "machine": platform.processor() or platform.machine(),
             "pages": sorted({r["page"] for r in results}),
+            "seeds": seeds,
             "errors": {f"{r['page']} {r['seed']}": r["errors"] for r in results if r["errors"]},
         }
     )
     args.out.with_suffix(".json").write_text(json.dumps({"runs": runs}, indent=1) + "\n", encoding="utf-8")
-    columns = [column(s) for s in seeds]
-    print(table(results, columns))
-    bad = any(c["verdict"] != "held" for r in results for c in r["claims"]) or any(r["errors"] for r in results)
+    ran_rows = [
+        row
+        for row in rows
+        if (row["page"], int(row["seed"]), row["env"]) in {(r["page"], r["seed"], label) for r in results}
+    ]
+    judged = judge(ran_rows)
+    print(table(judged))
+    print(summary(judged))
+    bad = any(c["status"] not in ("stands", "held") for c in judged) or any(r["errors"] for r in results)
     return 1 if bad else 0
 
 

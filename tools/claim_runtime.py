@@ -1,0 +1,102 @@
+"""What a page executed by tools/check_claims.py calls where its asserts stood: each claim's verdict and slack.
+
+check_claims rewrites ``assert a < b and np.all(c > d)`` into ``__book_claim__(lambda: __claim_compare__(...) and
+np.all(__claim_compare__(...)), key)``. Every ordered comparison of the claim's conjunction (``<``, ``<=``, ``>``,
+``>=``; inside ``and``, ``all``/``any`` and their NumPy spellings) is an *atom* with a number of its own, and records
+its *slack*: how far the comparison was from flipping, in the units of the compared values (``b - a`` for ``a < b``),
+the smallest over an array's elements (the largest under ``any``) and over the times a loop evaluates it. Equalities,
+memberships, ``not`` and ``or`` are taken as they are: they hold or fail, with no slack.
+
+A claim's slack on one draw says little; its spread over draws says how far the next draw may move it, which is what
+check_claims judges. The *margin* written beside each verdict is the tightest atom's slack relative to the larger of
+its two sides (0.25: a quarter of the compared value's size was to spare), for a reader of one draw.
+
+This file is executed as the first cell of the page's kernel (its source, with ``CLAIMS_LOG`` set), and imported by
+the tests; it needs NumPy only.
+"""
+
+import json
+import math
+import operator
+
+CLAIMS_LOG = None  # the JSON-lines file a kernel appends its verdicts to; set by check_claims in the kernel's copy
+
+_ORDERED = {"<": operator.lt, "<=": operator.le, ">": operator.gt, ">=": operator.ge}
+_OTHER = {
+    "==": operator.eq,
+    "!=": operator.ne,
+    "is": operator.is_,
+    "is not": operator.is_not,
+    "in": lambda a, b: a in b,
+    "not in": lambda a, b: a not in b,
+}
+_evaluation: dict[int, tuple[str, list]] = {}  # atom → ("min" or "max", its (slack, relative) in this evaluation)
+
+
+def _slack(op: str, left, right, reduce: str = "min") -> tuple[float, float] | None:
+    """(slack, relative slack) of ``left op right``, the smallest over elements (the largest when ``reduce`` is "max",
+    under ``any``); None when the sides are not numbers."""
+    import numpy as np
+
+    try:
+        a = np.asarray(left, dtype=np.float64)
+        b = np.asarray(right, dtype=np.float64)
+    except (TypeError, ValueError):
+        return None
+    if a.dtype.kind != "f" or b.dtype.kind != "f":
+        return None
+    with np.errstate(invalid="ignore", divide="ignore"):
+        gap = (b - a) if op in ("<", "<=") else (a - b)
+        scale = np.maximum(np.abs(a), np.abs(b))
+        relative = np.where(scale > 0, gap / np.where(scale > 0, scale, 1.0), 0.0)
+    if gap.size == 0:
+        return None
+    pick = np.max if reduce == "max" else np.min
+    return float(pick(gap)), float(pick(relative))
+
+
+def __claim_compare__(first_atom: int, reduce: str, ops: tuple, *operands):
+    """``operands[0] ops[0] operands[1] ops[1] …`` as Python evaluates it, recording each ordered pair's slack."""
+    outcome = True
+    for i, (op, left, right) in enumerate(zip(ops, operands, operands[1:])):
+        if op in _ORDERED:
+            result = _ORDERED[op](left, right)
+            slack = _slack(op, left, right, reduce)
+            if slack is not None:
+                _evaluation.setdefault(first_atom + i, (reduce, []))[1].append(slack)
+        else:
+            result = _OTHER[op](left, right)
+        if len(ops) == 1:
+            return result  # an array stays an array, for np.all and .all()
+        outcome = outcome and bool(result)
+        if not outcome:
+            return False
+    return outcome
+
+
+def __book_claim__(condition, key):
+    """Evaluates one claim (a lambda of its instrumented condition) and appends its verdict, slacks and margin."""
+    _evaluation.clear()
+    try:
+        verdict = "held" if bool(condition()) else "failed"
+    except Exception as error:  # the condition raised: its verdict names the exception
+        verdict = "error: " + type(error).__name__
+    slacks, relatives = {}, []
+    for atom, (reduce, values) in _evaluation.items():  # an atom evaluated several times (under all or any)
+        pick = max if reduce == "max" else min
+        slacks[atom] = pick(slack for slack, _ in values)
+        relatives.append(pick(relative for _, relative in values))
+    margin = min(relatives) if relatives else None
+    entry = {"key": key, "verdict": verdict, "slacks": _finite(slacks), "margin": _number(margin)}
+    if CLAIMS_LOG is not None:
+        with open(CLAIMS_LOG, "a", encoding="utf-8") as handle:
+            handle.write(json.dumps(entry) + "\n")
+    return entry
+
+
+def _number(x):
+    return None if x is None or not math.isfinite(x) else x
+
+
+def _finite(slacks: dict) -> dict:
+    return {str(atom): _number(value) for atom, value in slacks.items()}
