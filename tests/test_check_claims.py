@@ -188,3 +188,18 @@ def test_report_judges_the_record_without_running_anything(tmp_path, capsys):
     assert check_claims.main(["--report", "--out", str(out)]) == 1
     printed = capsys.readouterr().out
     assert "| thin |" in printed and "rule: held on all 16 draws and mean slack >= 3.85 sd" in printed
+
+
+@pytest.mark.timeout(180)
+def test_relocate_moves_rows_of_unchanged_code_and_names_pages_whose_code_changed(tmp_path, capsys):
+    book = tmp_path / "book"
+    book.mkdir()
+    (book / "page.md").write_text(MARGIN_PAGE)
+    out = tmp_path / "claims.csv"
+    assert check_claims.main(["--book", str(book), "--seeds", "0", "--jobs", "1", "--out", str(out)]) == 0
+    (book / "page.md").write_text(MARGIN_PAGE.replace("# Slack\n", "# Slack\n\nA new paragraph.\n\n"))
+    assert check_claims.main(["--relocate", "--book", str(book), "--out", str(out)]) == 0
+    assert sorted(int(row["line"]) for row in csv.DictReader(open(out, newline=""))) == [21, 22, 23]
+    (book / "page.md").write_text(MARGIN_PAGE.replace("+ draw", "+ 2 * draw"))  # the code changed
+    assert check_claims.main(["--relocate", "--book", str(book), "--out", str(out)]) == 1
+    assert "code changed since their rows were made: page" in capsys.readouterr().out

@@ -35,6 +35,7 @@ from __future__ import annotations
 import argparse
 import ast
 import csv
+import hashlib
 import json
 import math
 import os
@@ -194,6 +195,7 @@ def run_page(page: Path, seed: int, env: dict[str, str], timeout: int) -> dict:
 
     os.environ.update(env)
     os.environ["BOOK_SEED"] = str(seed)
+    code = code_of(page)
     notebook = read_page(page)
     claims = instrument(page, notebook)
     with tempfile.TemporaryDirectory() as scratch:
@@ -219,7 +221,46 @@ def run_page(page: Path, seed: int, env: dict[str, str], timeout: int) -> dict:
             claim.update(_combine(evaluations[claim["key"]]))
         else:
             claim.update(verdict="not reached", slacks={}, margin=None)
-    return {"page": page.stem, "seed": seed, "claims": claims, "errors": errors, "seconds": seconds}
+    return {"page": page.stem, "seed": seed, "claims": claims, "errors": errors, "seconds": seconds, "code": code}
+
+
+def code_of(page: Path) -> str:
+    """A fingerprint of what a page's execution depends on: its code cells, book/_pages.py and minippo's modules (all
+    but the grader's). Rows with the same fingerprint came from the same code, so a page whose prose moved its claims
+    to other lines keeps its rows (``--relocate``) until its code changes."""
+    digest = hashlib.sha256()
+    for cell in read_page(page).cells:
+        if cell.cell_type == "code":
+            digest.update(cell.source.encode("utf-8") + b"\0")
+    library = sorted(p for p in (ROOT / "minippo").rglob("*.py") if "grading" not in p.relative_to(ROOT).parts)
+    for path in [page.parent / "_pages.py", *library]:
+        if path.exists():
+            digest.update(str(path.relative_to(path.parent.parent)).encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()[:12]
+
+
+def relocate(rows: list[dict], book: Path) -> tuple[list[dict], list[str]]:
+    """Gives each row of a page whose fingerprint is today's the line its claim now has (claims matched by text, in
+    order); returns the rows and the pages whose code has changed since their rows were made (to be run again)."""
+    stale, current = set(), {}
+    for page in {row["page"] for row in rows}:
+        path = book / f"{page}.md"
+        if not path.exists() or any(row["code"] != code_of(path) for row in rows if row["page"] == page):
+            stale.add(page)
+            continue
+        claims = instrument(path, read_page(path))
+        current[page] = [(c["text"], c["line"]) for c in claims]
+    for page, claims in current.items():
+        for seed in {row["seed"] for row in rows if row["page"] == page}:
+            mine = sorted(
+                (row for row in rows if row["page"] == page and row["seed"] == seed), key=lambda r: int(r["line"])
+            )
+            if [row["claim"] for row in mine] != [text for text, _ in claims]:
+                stale.add(page)
+                break
+            for row, (_, line) in zip(mine, claims):
+                row["line"] = line
+    return rows, sorted(stale)
 
 
 def seeds_from(text: str) -> list[int]:
@@ -241,7 +282,7 @@ def commit() -> str:
     return head.stdout.strip() + ("+dirty" if dirty else "")
 
 
-FIELDS = ["page", "line", "claim", "seed", "env", "verdict", "margin", "slacks"]
+FIELDS = ["page", "line", "claim", "seed", "env", "verdict", "margin", "slacks", "code"]
 FEWEST_DRAWS = 8  # below this many draws a claim's spread is not judged, only its verdicts
 COVERAGE = 0.999  # the one-sided prediction interval a claim's slack must clear on a draw not yet run
 
@@ -355,10 +396,8 @@ def read_record(path: Path) -> list[dict]:
     with open(path, newline="", encoding="utf-8") as handle:
         rows = list(csv.DictReader(handle))
     for row in rows:  # a record from before slacks were kept
-        row.setdefault("margin", "")
-        row.setdefault("slacks", "")
-        row["margin"] = row["margin"] or ""
-        row["slacks"] = row["slacks"] or ""
+        for field in ("margin", "slacks", "code"):
+            row[field] = row.get(field) or ""
     return rows
 
 
@@ -383,12 +422,29 @@ def main(argv=None) -> int:
     parser.add_argument(
         "--report", action="store_true", help="run nothing: judge the claims of --out (of --pages) over its draws"
     )
+    parser.add_argument(
+        "--relocate",
+        action="store_true",
+        help="run nothing: move --out's rows to their claims' current lines where a page's code is unchanged, and "
+        "name the pages whose code changed (to run again)",
+    )
     args = parser.parse_args(argv)
     try:
         seeds = seeds_from(args.seeds)
         env = dict(item.split("=", 1) for item in args.env)
     except ValueError:
         parser.error("--seeds takes integers such as 0-15 or 0,3,5, and --env takes NAME=VALUE")
+    if args.relocate:
+        if not args.out.exists():
+            parser.error(f"no record at {args.out}")
+        rows, stale = relocate(read_record(args.out), args.book)
+        rows.sort(key=lambda row: (row["env"], row["page"], int(row["seed"]), int(row["line"])))
+        with open(args.out, "w", newline="", encoding="utf-8") as handle:
+            writer = csv.DictWriter(handle, FIELDS)
+            writer.writeheader()
+            writer.writerows(rows)
+        print("code changed since their rows were made: " + (" ".join(stale) if stale else "none"))
+        return 1 if stale else 0
     if args.report:
         if not args.out.exists():
             parser.error(f"no record at {args.out}")
@@ -434,6 +490,7 @@ def main(argv=None) -> int:
             "verdict": claim["verdict"],
             "margin": "" if claim["margin"] is None else f"{claim['margin']:.6g}",
             "slacks": json.dumps({a: (None if v is None else float(f"{v:.6g}")) for a, v in claim["slacks"].items()}),
+            "code": result["code"],
         }
         for result in results
         for claim in result["claims"]
