@@ -7,6 +7,7 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 pytestmark = pytest.mark.book  # small books' pages executed under several draws
@@ -139,10 +140,20 @@ def test_each_ordered_comparison_records_its_slack_in_the_compared_units(tmp_pat
     assert check_claims.main(["--book", str(book), "--seeds", "0,2", "--jobs", "1", "--out", str(out)]) == 0
     rows = {(row["line"], row["seed"]): row for row in csv.DictReader(open(out, newline=""))}
     # draw 2: values = 3, 4, 5. Atoms in source order: 0.5 < min, min < 100, all(values > 0.25); the == has none
-    assert json.loads(rows["18", "2"]["slacks"]) == {"0": 2.5, "1": 97.0, "2": 2.75}
+    # each slack a pair: the difference, and log(larger / smaller) where both sides are positive
+    slacks = json.loads(rows["18", "2"]["slacks"])
+    assert slacks == {
+        "0": [2.5, pytest.approx(np.log(6), rel=1e-5)],
+        "1": [97.0, pytest.approx(np.log(100 / 3), rel=1e-5)],
+        "2": [2.75, pytest.approx(np.log(12), rel=1e-5)],
+    }
     assert float(rows["18", "2"]["margin"]) == pytest.approx(2.5 / 3)  # the tightest relative to its larger side
     # any: the largest element's slack (5 - 4.5); all over a generator: the smallest (50 - 5)
-    assert json.loads(rows["19", "2"]["slacks"]) == {"0": 0.5, "1": 45.0}
+    slacks = json.loads(rows["19", "2"]["slacks"])
+    assert slacks == {
+        "0": [0.5, pytest.approx(np.log(5 / 4.5), rel=1e-5)],
+        "1": [45.0, pytest.approx(np.log(10), rel=1e-5)],
+    }
     assert rows["20", "0"]["slacks"] == "{}" and rows["20", "0"]["margin"] == ""
 
 
@@ -157,7 +168,7 @@ def _rows(slacks, verdicts=None):
             "seed": str(seed),
             "verdict": verdict,
             "margin": "",
-            "slacks": json.dumps({"0": slack}),
+            "slacks": json.dumps({"0": slack if isinstance(slack, list) else [slack, None]}),
         }
         for seed, (slack, verdict) in enumerate(zip(slacks, verdicts))
     ]
@@ -177,6 +188,17 @@ def test_a_claim_stands_only_when_its_slack_clears_the_prediction_bound():
     (judged,) = check_claims.judge(_rows([0.0] * 16))  # an exact claim that never moves (x <= 0 with x = 0)
     assert judged["status"] == "stands" and judged["spreads"] is None
     assert 3.8 < check_claims.needed_spreads(16) < 3.9 and 5.0 < check_claims.needed_spreads(8) < 5.1
+
+
+def test_two_sides_of_one_sign_are_judged_on_the_log_scale():
+    """x > 10 with x = 10 e^u, u evenly over 2 … 3.4: the differences x − 10 have a long right tail (2.15 spreads,
+    thin), but x is a factor of e² or more above its bound on every draw (6.1 spreads on the log scale)."""
+    us = [2 + 1.4 * k / 15 for k in range(16)]
+    pairs = [[10 * np.exp(u) - 10, u] for u in us]
+    (judged,) = check_claims.judge(_rows(pairs))
+    assert judged["status"] == "stands" and 6.0 < judged["spreads"] < 6.2
+    (judged,) = check_claims.judge(_rows([[d, None] for d, _ in pairs]))  # the same on a difference scale only
+    assert judged["status"] == "thin" and 2.1 < judged["spreads"] < 2.2
 
 
 def test_report_judges_the_record_without_running_anything(tmp_path, capsys):

@@ -16,7 +16,8 @@ ahead-of-time execution (``book/_ext/execute_ahead.py``), several at a time, eac
 
 A claim that held on the draws run may still be fitted to them. So a claim *stands* only when it held on every draw
 and each comparison's slack, over the draws, keeps its mean at least ``needed_spreads(n)`` standard deviations above
-zero (3.85 for 16 draws): the one-sided 99.9 % prediction bound for a draw not yet run is then above zero. A claim
+zero (3.85 for 16 draws): the one-sided 99.9 % prediction bound for a draw not yet run is then above zero (on a log
+scale for two sides of one sign, a KL under a bound or a ratio over a factor; as a difference otherwise). A claim
 that held everywhere but is closer than that is *thin*, and a page with a thin claim fails as one with a failed claim
 does. With fewer than eight draws only the verdicts are judged.
 
@@ -170,15 +171,19 @@ def _prelude(log: Path) -> str:
 
 def _combine(entries: list[dict]) -> dict:
     """One claim's evaluations on one draw (several when a loop evaluates it) as one: it holds if it always held, and
-    each atom keeps its smallest slack."""
+    each atom keeps its smallest slack, in both of its units (``tools/claim_runtime.py``)."""
     verdict = next((e["verdict"] for e in entries if e["verdict"] != "held"), "held")
-    slacks: dict[str, float | None] = {}
+    slacks: dict[str, list] = {}
     for entry in entries:
-        for atom, value in entry.get("slacks", {}).items():
-            known = slacks.get(atom)
-            slacks[atom] = value if known is None or (value is not None and value < known) else known
+        for atom, pair in entry.get("slacks", {}).items():
+            known = slacks.setdefault(atom, pair)
+            slacks[atom] = [_smaller(known[0], pair[0]), _smaller(known[1], pair[1])]
     margins = [e["margin"] for e in entries if e.get("margin") is not None]
     return {"verdict": verdict, "slacks": slacks, "margin": min(margins) if margins else None}
+
+
+def _smaller(a, b):
+    return None if a is None or b is None else min(a, b)
 
 
 def read_page(page: Path):
@@ -301,7 +306,10 @@ def judge(rows: list[dict]) -> list[dict]:
     its atoms' slack clears ``needed_spreads`` (an atom whose slack never moves clears it by holding), ``thin`` when it
     held on every draw but some atom's spread leaves too little room, ``failed`` when some draw failed it, and ``held``
     when it held on fewer than FEWEST_DRAWS draws, too few to judge a spread. ``spreads`` is the smallest over the
-    atoms of mean / standard deviation of the slack (None: no atom moved, or none is ordered)."""
+    atoms of mean / standard deviation of the slack (None: no atom moved, or none is ordered). An atom whose two sides
+    kept one sign on every draw is judged on the log scale, where a threshold is a factor away and a ratio's long
+    right tail does not pass for spread; any other on the difference. Which scale is decided by the signs alone,
+    before any slack is looked at."""
     claims: dict[tuple, dict] = {}
     for row in rows:
         key = (row["page"], int(row["line"]), row["claim"], row["env"])
@@ -319,8 +327,8 @@ def judge(rows: list[dict]) -> list[dict]:
         )
         claim["verdicts"][int(row["seed"])] = row["verdict"]
         slacks = row["slacks"] if isinstance(row["slacks"], dict) else json.loads(row["slacks"] or "{}")
-        for atom, value in slacks.items():
-            claim["slacks"].setdefault(atom, []).append(value)
+        for atom, pair in slacks.items():
+            claim["slacks"].setdefault(atom, []).append(pair if isinstance(pair, list) else [pair, None])
         if row["margin"] not in (None, ""):
             claim["margins"].append(float(row["margin"]))
     judged = []
@@ -328,9 +336,14 @@ def judge(rows: list[dict]) -> list[dict]:
         draws = len(claim["verdicts"])
         held = all(v == "held" for v in claim["verdicts"].values())
         spreads = None
-        for values in claim["slacks"].values():
-            if len(values) < draws or any(v is None for v in values):
+        for pairs in claim["slacks"].values():
+            if len(pairs) < draws:
                 continue  # not evaluated on some draw: the verdicts say it
+            # on a log scale when both sides kept one sign on every draw (a factor away), else as differences
+            logged = all(pair[1] is not None for pair in pairs)
+            values = [pair[1] if logged else pair[0] for pair in pairs]
+            if any(v is None for v in values):
+                continue
             mean, sd = statistics.fmean(values), statistics.stdev(values) if len(values) > 1 else 0.0
             z = math.inf if sd == 0 else mean / sd
             spreads = z if spreads is None else min(spreads, z)
@@ -390,6 +403,10 @@ def summary(judged: list[dict]) -> str:
     if draws >= FEWEST_DRAWS:
         lines.append(f"rule: held on all {draws} draws and mean slack >= {needed_spreads(draws):.2f} sd")
     return "\n".join(lines)
+
+
+def _short(value):
+    return None if value is None else float(f"{value:.6g}")
 
 
 def read_record(path: Path) -> list[dict]:
@@ -489,7 +506,7 @@ def main(argv=None) -> int:
             "env": label,
             "verdict": claim["verdict"],
             "margin": "" if claim["margin"] is None else f"{claim['margin']:.6g}",
-            "slacks": json.dumps({a: (None if v is None else float(f"{v:.6g}")) for a, v in claim["slacks"].items()}),
+            "slacks": json.dumps({a: [_short(v) for v in pair] for a, pair in claim["slacks"].items()}),
             "code": result["code"],
         }
         for result in results

@@ -3,9 +3,10 @@
 check_claims rewrites ``assert a < b and np.all(c > d)`` into ``__book_claim__(lambda: __claim_compare__(...) and
 np.all(__claim_compare__(...)), key)``. Every ordered comparison of the claim's conjunction (``<``, ``<=``, ``>``,
 ``>=``; inside ``and``, ``all``/``any`` and their NumPy spellings) is an *atom* with a number of its own, and records
-its *slack*: how far the comparison was from flipping, in the units of the compared values (``b - a`` for ``a < b``),
-the smallest over an array's elements (the largest under ``any``) and over the times a loop evaluates it. Equalities,
-memberships, ``not`` and ``or`` are taken as they are: they hold or fail, with no slack.
+its *slack*: how far the comparison was from flipping, as a pair: in the units of the compared values (``b - a`` for ``a
+< b``), and on a log scale where both sides have one sign (``log(b / a)``), each the smallest over an array's elements
+(the largest under ``any``) and over the times a loop evaluates it. Equalities, memberships, ``not`` and ``or`` are
+taken as they are: they hold or fail, with no slack.
 
 A claim's slack on one draw says little; its spread over draws says how far the next draw may move it, which is what
 check_claims judges. The *margin* written beside each verdict is the tightest atom's slack relative to the larger of
@@ -30,12 +31,15 @@ _OTHER = {
     "in": lambda a, b: a in b,
     "not in": lambda a, b: a not in b,
 }
-_evaluation: dict[int, tuple[str, list]] = {}  # atom → ("min" or "max", its (slack, relative) in this evaluation)
+_evaluation: dict[int, tuple[str, list]] = {}  # atom → ("min" or "max", its _slack()s in this evaluation)
 
 
-def _slack(op: str, left, right, reduce: str = "min") -> tuple[float, float] | None:
-    """(slack, relative slack) of ``left op right``, the smallest over elements (the largest when ``reduce`` is "max",
-    under ``any``); None when the sides are not numbers."""
+def _slack(op: str, left, right, reduce: str = "min") -> tuple[float, float, float | None] | None:
+    """(slack, relative slack, log slack) of ``left op right``, each the smallest over elements (the largest when
+    ``reduce`` is "max", under ``any``); None when the sides are not numbers. The log slack is the slack on a log
+    scale, log(b / a) for 0 < a < b (log(a / b) when both are negative), and None unless the two sides have one sign
+    everywhere: for such quantities (a KL, a ratio of two losses, a count) a threshold is a factor away, not a
+    difference."""
     import numpy as np
 
     try:
@@ -52,7 +56,13 @@ def _slack(op: str, left, right, reduce: str = "min") -> tuple[float, float] | N
     if gap.size == 0:
         return None
     pick = np.max if reduce == "max" else np.min
-    return float(pick(gap)), float(pick(relative))
+    low, high = (a, b) if op in ("<", "<=") else (b, a)
+    logged = None
+    if np.all(low > 0) and np.all(high > 0):
+        logged = float(pick(np.log(high) - np.log(low)))
+    elif np.all(low < 0) and np.all(high < 0):
+        logged = float(pick(np.log(-low) - np.log(-high)))
+    return float(pick(gap)), float(pick(relative)), logged
 
 
 def __claim_compare__(first_atom: int, reduce: str, ops: tuple, *operands):
@@ -84,10 +94,19 @@ def __book_claim__(condition, key):
     slacks, relatives = {}, []
     for atom, (reduce, values) in _evaluation.items():  # an atom evaluated several times (under all or any)
         pick = max if reduce == "max" else min
-        slacks[atom] = pick(slack for slack, _ in values)
-        relatives.append(pick(relative for _, relative in values))
+        logs = [logged for _, _, logged in values]
+        slacks[atom] = [
+            _number(pick(slack for slack, _, _ in values)),
+            None if None in logs else _number(pick(logs)),
+        ]
+        relatives.append(pick(relative for _, relative, _ in values))
     margin = min(relatives) if relatives else None
-    entry = {"key": key, "verdict": verdict, "slacks": _finite(slacks), "margin": _number(margin)}
+    entry = {
+        "key": key,
+        "verdict": verdict,
+        "slacks": {str(a): v for a, v in slacks.items()},
+        "margin": _number(margin),
+    }
     if CLAIMS_LOG is not None:
         with open(CLAIMS_LOG, "a", encoding="utf-8") as handle:
             handle.write(json.dumps(entry) + "\n")
@@ -96,7 +115,3 @@ def __book_claim__(condition, key):
 
 def _number(x):
     return None if x is None or not math.isfinite(x) else x
-
-
-def _finite(slacks: dict) -> dict:
-    return {str(atom): _number(value) for atom, value in slacks.items()}
