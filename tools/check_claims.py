@@ -166,7 +166,7 @@ def instrument(page: Path, notebook) -> list[dict]:
 def _prelude(log: Path) -> str:
     """The first cell of an instrumented page: tools/claim_runtime.py, writing to ``log``."""
     runtime = (Path(__file__).resolve().parent / "claim_runtime.py").read_text(encoding="utf-8")
-    return runtime + f"\nCLAIMS_LOG = {str(log)!r}\n"
+    return runtime + f"\nCLAIMS_LOG = {str(log)!r}\n__claims_watch__({str(ROOT)!r})\n"
 
 
 def _combine(entries: list[dict]) -> dict:
@@ -200,20 +200,24 @@ def run_page(page: Path, seed: int, env: dict[str, str], timeout: int) -> dict:
 
     os.environ.update(env)
     os.environ["BOOK_SEED"] = str(seed)
-    code = code_of(page)
     notebook = read_page(page)
     claims = instrument(page, notebook)
     with tempfile.TemporaryDirectory() as scratch:
         log = Path(scratch) / "claims.jsonl"
         log.touch()
         notebook.cells.insert(0, nbformat.v4.new_code_cell(_prelude(log)))
+        notebook.cells.append(nbformat.v4.new_code_cell(f"__claims_files__({str(ROOT)!r});"))
         started = time.monotonic()
         single_nb_execution(notebook, cwd=str(page.parent), allow_errors=True, timeout=timeout, meta_override=True)
         seconds = time.monotonic() - started
         evaluations: dict[str, list[dict]] = {}
+        files: list[str] = []
         for line in log.read_text(encoding="utf-8").splitlines():
             entry = json.loads(line)
-            evaluations.setdefault(entry["key"], []).append(entry)
+            if "files" in entry:
+                files = entry["files"]
+            else:
+                evaluations.setdefault(entry["key"], []).append(entry)
     errors = [
         f"{output.ename}: {output.evalue}".splitlines()[0][:160]
         for cell in notebook.cells
@@ -226,31 +230,45 @@ def run_page(page: Path, seed: int, env: dict[str, str], timeout: int) -> dict:
             claim.update(_combine(evaluations[claim["key"]]))
         else:
             claim.update(verdict="not reached", slacks={}, margin=None)
-    return {"page": page.stem, "seed": seed, "claims": claims, "errors": errors, "seconds": seconds, "code": code}
+    code = code_of(page, files)
+    return {
+        "page": page.stem,
+        "seed": seed,
+        "claims": claims,
+        "errors": errors,
+        "seconds": seconds,
+        "code": code,
+        "files": files,
+    }
 
 
-def code_of(page: Path) -> str:
-    """A fingerprint of what a page's execution depends on: its code cells, book/_pages.py and minippo's modules (all
-    but the grader's). Rows with the same fingerprint came from the same code, so a page whose prose moved its claims
-    to other lines keeps its rows (``--relocate``) until its code changes."""
+def code_of(page: Path, files: list[str]) -> str:
+    """A fingerprint of what a page's execution depended on: its code cells and the course's files it read or imported
+    (``files``, relative to the repository, as its kernel noted them). Rows with the same fingerprint came from the
+    same code and data, so a page whose prose moved its claims to other lines keeps its rows (``--relocate``) until
+    its code, or a file it reads, changes."""
     digest = hashlib.sha256()
     for cell in read_page(page).cells:
         if cell.cell_type == "code":
             digest.update(cell.source.encode("utf-8") + b"\0")
-    library = sorted(p for p in (ROOT / "minippo").rglob("*.py") if "grading" not in p.relative_to(ROOT).parts)
-    for path in [page.parent / "_pages.py", *library]:
-        if path.exists():
-            digest.update(str(path.relative_to(path.parent.parent)).encode() + b"\0" + path.read_bytes())
+    for name in sorted(files):
+        path = ROOT / name
+        digest.update(name.encode() + b"\0" + (path.read_bytes() if path.is_file() else b"(gone)") + b"\0")
     return digest.hexdigest()[:12]
 
 
-def relocate(rows: list[dict], book: Path) -> tuple[list[dict], list[str]]:
+def relocate(rows: list[dict], book: Path, depends: dict[str, list[str]]) -> tuple[list[dict], list[str]]:
     """Gives each row of a page whose fingerprint is today's the line its claim now has (claims matched by text, in
-    order); returns the rows and the pages whose code has changed since their rows were made (to be run again)."""
+    order); returns the rows and the pages whose code has changed since their rows were made (to be run again).
+    ``depends`` maps each page to the files its last run read."""
     stale, current = set(), {}
     for page in {row["page"] for row in rows}:
         path = book / f"{page}.md"
-        if not path.exists() or any(row["code"] != code_of(path) for row in rows if row["page"] == page):
+        if (
+            not path.exists()
+            or page not in depends
+            or any(row["code"] != code_of(path, depends[page]) for row in rows if row["page"] == page)
+        ):
             stale.add(page)
             continue
         claims = instrument(path, read_page(path))
@@ -405,6 +423,16 @@ def summary(judged: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def depends_of(record: Path) -> dict[str, list[str]]:
+    """Each page's files as its latest run in ``record``'s JSON noted them."""
+    about = record.with_suffix(".json")
+    depends: dict[str, list[str]] = {}
+    if about.exists():
+        for run in json.loads(about.read_text(encoding="utf-8")).get("runs", []):
+            depends.update(run.get("depends", {}))
+    return depends
+
+
 def _short(value):
     return None if value is None else float(f"{value:.6g}")
 
@@ -454,7 +482,7 @@ def main(argv=None) -> int:
     if args.relocate:
         if not args.out.exists():
             parser.error(f"no record at {args.out}")
-        rows, stale = relocate(read_record(args.out), args.book)
+        rows, stale = relocate(read_record(args.out), args.book, depends_of(args.out))
         rows.sort(key=lambda row: (row["env"], row["page"], int(row["seed"]), int(row["line"])))
         with open(args.out, "w", newline="", encoding="utf-8") as handle:
             writer = csv.DictWriter(handle, FIELDS)
@@ -534,6 +562,7 @@ def main(argv=None) -> int:
             "machine": platform.processor() or platform.machine(),
             "pages": sorted({r["page"] for r in results}),
             "seeds": seeds,
+            "depends": {r["page"]: r["files"] for r in results},
             "errors": {f"{r['page']} {r['seed']}": r["errors"] for r in results if r["errors"]},
         }
     )

@@ -13,12 +13,16 @@ check_claims judges. The *margin* written beside each verdict is the tightest at
 its two sides (0.25: a quarter of the compared value's size was to spare), for a reader of one draw.
 
 This file is executed as the first cell of the page's kernel (its source, with ``CLAIMS_LOG`` set), and imported by
-the tests; it needs NumPy only.
+the tests; it needs NumPy only. It also notes which of the course's files the page reads or imports (an audit hook on
+``open``, and ``sys.modules``): check_claims fingerprints a page's rows with them, so that a row is known to come from
+the code and data the page runs today.
 """
 
 import json
 import math
 import operator
+import os
+import sys
 
 CLAIMS_LOG = None  # the JSON-lines file a kernel appends its verdicts to; set by check_claims in the kernel's copy
 
@@ -115,3 +119,41 @@ def __book_claim__(condition, key):
 
 def _number(x):
     return None if x is None or not math.isfinite(x) else x
+
+
+_read: set[str] = set()
+
+
+def __claims_watch__(root: str) -> None:
+    """Notes every file under ``root`` that the kernel opens for reading from now on."""
+    prefix = os.path.join(os.path.realpath(root), "")
+
+    def hook(event, args):
+        if event == "open" and isinstance(args[0], (str, bytes, os.PathLike)):
+            mode = args[1] if len(args) > 1 and isinstance(args[1], str) else "r"
+            if not any(c in mode for c in "wax+"):
+                path = os.path.realpath(os.fsdecode(args[0]))
+                if path.startswith(prefix):
+                    _read.add(path)
+
+    sys.addaudithook(hook)
+
+
+def __claims_files__(root: str) -> list[str]:
+    """The files under ``root`` the page read or imported (a module by its source, not its cached bytecode), relative
+    to ``root``, sorted; appended to CLAIMS_LOG."""
+    root = os.path.realpath(root)
+    paths = set(_read)
+    for module in list(sys.modules.values()):
+        file = getattr(module, "__file__", None)
+        if file:
+            paths.add(os.path.realpath(file))
+    kept = sorted(
+        os.path.relpath(p, root)
+        for p in paths
+        if p.startswith(os.path.join(root, "")) and "__pycache__" not in p and "_build" not in p and os.path.isfile(p)
+    )
+    if CLAIMS_LOG is not None:
+        with open(CLAIMS_LOG, "a", encoding="utf-8") as handle:
+            handle.write(json.dumps({"files": kept}) + "\n")
+    return kept
