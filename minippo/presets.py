@@ -65,9 +65,11 @@ ATARI = dict(
 
 # A2C (Mnih et al. 2016, synchronous), the paper's Atari baseline, from minippo's pieces: the L^PG objective (eq. 2)
 # with one gradient step on each batch of N = 16 actors × T = 5 steps, n-step advantages (GAE with λ = 1 is the
-# bootstrapped n-step return minus V), c1 = 0.5, c2 = 0.01, step size 7e-4 falling to 0, gradient norm clipped at 0.5,
-# no advantage normalisation, no value clipping, on the same network and observations as ATARI. These are the defaults
-# of OpenAI Baselines' A2C (a2c.learn), with Adam (ε = 1e-5) in place of its RMSProp, since minippo has only Adam. They
+# bootstrapped n-step return minus V), value_coef = 0.5 (c1 = 0.25), c2 = 0.01, step size 7e-4 falling to 0, gradient
+# norm clipped at 0.5, no advantage normalisation, no value clipping, on the same network and observations as ATARI.
+# These are the defaults of OpenAI Baselines' A2C (a2c.learn) as released in August 2017 (commit 3f676f7), whose
+# vf_coef = 0.5 weighed a halved squared error as minippo's value_coef does (its later a2c drops the ½, which would be
+# value_coef = 1.0 here), with Adam (ε = 1e-5) in place of its RMSProp, since minippo has only Adam. They
 # are not the paper's: its A2C used settings "tuned to maximize performance" (section 6.4) that it does not list.
 A2C = dict(
     ATARI,
