@@ -60,8 +60,8 @@ __all__ = [
     "SAGE",
     "SEED",
     "SLATE",
-    "PPO_CARTPOLE",
-    "VANILLA_CARTPOLE",
+    "CARTPOLE_PPO",
+    "CARTPOLE_VANILLA",
     "central_differences",
     "corridor_rounds",
     "epochs_on_one_batch",
@@ -70,9 +70,6 @@ __all__ = [
     "trains_as_now",
     "unchanged_since",
 ]
-
-# The book's two CartPole settings and its finite differences, from minippo (one copy each)
-VANILLA_CARTPOLE, PPO_CARTPOLE = CARTPOLE_VANILLA, CARTPOLE_PPO
 
 
 def one_batch(config):

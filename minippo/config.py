@@ -49,7 +49,7 @@ class Config:
     kl_target: float = setting(0.01, "d_targ, the KL that β adapts towards")
     adaptive_kl: bool = setting(True, "β halves or doubles after each update (false: β stays fixed)")
     # eq. 9: one objective for policy, value and entropy
-    value_coef: float = setting(0.5, "c1, the value loss's weight")
+    value_coef: float = setting(0.5, "c1, the weight of the value loss ½ Ê[(V − V^targ)²] (with its ½; eq. 9)")
     entropy_coef: float = setting(0.0, "c2, the entropy bonus's weight (the paper uses none for MuJoCo)")
     shared_network: bool = setting(False, "one tanh trunk, a policy head and a value head")
     hidden_sizes: tuple[int, ...] = setting((64, 64), "the tanh layers' widths, for the policy and the value network")

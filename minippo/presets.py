@@ -36,8 +36,9 @@ CARTPOLE_PPO = dict(
 
 # The paper's Table 5 (Atari): N = 8 actors, T = 128, K = 3 epochs, minibatches of 32 × 8 = 256, step size 2.5e-4 × α
 # and ε = 0.1 × α with α falling linearly from 1 to 0, c1 = 1, c2 = 0.01, γ = 0.99, λ = 0.95; one network with a policy
-# and a value head (eq. 9). minippo's value loss carries its own ½, so value_coef = 1.0 is c1 = 0.5 in the paper's form
-# (its c1 = 1 would be value_coef = 2.0); the MinAtar records were made with 1.0. Advantage normalisation and value
+# and a value head (eq. 9). minippo's value loss carries a ½ the paper's does not, so value_coef = 1.0 weighs the
+# squared error by 0.5, half of Table 5's c1 = 1 (which would be value_coef = 2.0); the MinAtar records were made with
+# 1.0. Advantage normalisation and value
 # clipping are Config's defaults (OpenAI Baselines' ppo2 does both; Table 5 does not list them). The network is
 # MinAtar's (conv 16 3×3, dense 128), not the paper's: the paper used Mnih et al. 2016's for all three algorithms (conv
 # 16 8×8 stride 4, conv 32 4×4 stride 2, dense 256, on 84 × 84 × 4 frames); Baselines' code uses the Nature DQN network
@@ -65,9 +66,11 @@ ATARI = dict(
 
 # A2C (Mnih et al. 2016, synchronous), the paper's Atari baseline, from minippo's pieces: the L^PG objective (eq. 2)
 # with one gradient step on each batch of N = 16 actors × T = 5 steps, n-step advantages (GAE with λ = 1 is the
-# bootstrapped n-step return minus V), c1 = 0.5, c2 = 0.01, step size 7e-4 falling to 0, gradient norm clipped at 0.5,
-# no advantage normalisation, no value clipping, on the same network and observations as ATARI. These are the defaults
-# of OpenAI Baselines' A2C (a2c.learn), with Adam (ε = 1e-5) in place of its RMSProp, since minippo has only Adam. They
+# bootstrapped n-step return minus V), c1 = value_coef = 0.5, c2 = 0.01, step size 7e-4 falling to 0, gradient norm
+# clipped at 0.5, no advantage normalisation, no value clipping, on the same network and observations as ATARI. These
+# are the defaults of OpenAI Baselines' A2C (a2c.learn) as released in August 2017 (commit 3f676f7), whose vf_coef =
+# 0.5 weighed a halved squared error as minippo's value_coef does (its a2c since August 2018 drops the ½, which would
+# be value_coef = 1.0 here), with Adam (ε = 1e-5) in place of its RMSProp, since minippo has only Adam. They
 # are not the paper's: its A2C used settings "tuned to maximize performance" (section 6.4) that it does not list.
 A2C = dict(
     ATARI,
