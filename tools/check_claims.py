@@ -14,12 +14,13 @@ of every claim on it, and each ordered comparison in it records its slack, how f
 ahead-of-time execution (``book/_ext/execute_ahead.py``), several at a time, each in a kernel of its own with
 ``BOOK_SEED`` set.
 
-A claim that held on the draws run may still be fitted to them. So a claim *stands* only when it held on every draw
-and each comparison's slack, over the draws, keeps its mean at least ``needed_spreads(n)`` standard deviations above
-zero (3.85 for 16 draws): the one-sided 99.9 % prediction bound for a draw not yet run is then above zero (on a log
-scale for two sides of one sign, a KL under a bound or a ratio over a factor; as a difference otherwise). A claim
-that held everywhere but is closer than that is *thin*, and a page with a thin claim fails as one with a failed claim
-does. With fewer than eight draws only the verdicts are judged.
+A claim that held on the draws run may still be fitted to them. So a claim *stands* only when it held on every draw and
+each comparison's slack, over the draws, keeps its median at least ``needed_spreads(n)`` standard deviations above zero
+(3.85 for 16 draws; the deviation read from the draws below the median, since a slack fails on its low side only): the
+one-sided 99.9 % prediction bound for a draw not yet run is then above zero (on a log scale for two sides of one sign, a
+KL under a bound or a ratio over a factor; as a difference otherwise). A claim that held everywhere but is closer than
+that is *thin*, and a page with a thin claim fails as one with a failed claim does. With fewer than eight draws only the
+verdicts are judged.
 
 The record (``--out``, default ``benchmarks/results/book_claims.csv``) has one row per claim and draw: the page, the
 claim's line in the page's source, its text, the seed, the environment, the verdict (``held``, ``failed``, ``not
@@ -319,15 +320,26 @@ def needed_spreads(draws: int) -> float:
     return float(t.ppf(COVERAGE, draws - 1) * math.sqrt(1 + 1 / draws))
 
 
+def downside_spread(values: list[float]) -> float:
+    """The standard deviation that the draws below the median imply: √(2 Σ_{x < median} (x − median)² / (n − 1)). A
+    slack fails on its low side only, so a draw far above the rest (a bound met by a factor of a hundred once) must
+    not pass for risk, nor pull the centre up; for a spread symmetric about its median this is the ordinary standard
+    deviation."""
+    if len(values) < 2:
+        return 0.0
+    centre = statistics.median(values)
+    return math.sqrt(2 * sum((x - centre) ** 2 for x in values if x < centre) / (len(values) - 1))
+
+
 def judge(rows: list[dict]) -> list[dict]:
-    """Each claim (page, line, text, env) over the draws in ``rows``: ``stands`` when it held on every draw and each of
-    its atoms' slack clears ``needed_spreads`` (an atom whose slack never moves clears it by holding), ``thin`` when it
-    held on every draw but some atom's spread leaves too little room, ``failed`` when some draw failed it, and ``held``
-    when it held on fewer than FEWEST_DRAWS draws, too few to judge a spread. ``spreads`` is the smallest over the
-    atoms of mean / standard deviation of the slack (None: no atom moved, or none is ordered). An atom whose two sides
-    kept one sign on every draw is judged on the log scale, where a threshold is a factor away and a ratio's long
-    right tail does not pass for spread; any other on the difference. Which scale is decided by the signs alone,
-    before any slack is looked at."""
+    """Each claim (page, line, text, env) over the draws in ``rows``: ``stands`` when it held on every draw and each
+    of its atoms' slack clears ``needed_spreads`` (an atom whose slack never moves clears it by holding), ``thin``
+    when it held on every draw but some atom's spread leaves too little room, ``failed`` when some draw failed it,
+    and ``held`` when it held on fewer than FEWEST_DRAWS draws, too few to judge a spread. ``spreads`` is the
+    smallest over the atoms of the slack's median over its downside spread (``downside_spread``; None: no atom
+    moved, or none is ordered). An atom whose two sides kept one sign on every draw is judged on the log scale,
+    where a threshold is a factor away and a ratio's long right tail does not pass for spread; any other on the
+    difference. Which scale is decided by the signs alone, before any slack is looked at."""
     claims: dict[tuple, dict] = {}
     for row in rows:
         key = (row["page"], int(row["line"]), row["claim"], row["env"])
@@ -362,8 +374,8 @@ def judge(rows: list[dict]) -> list[dict]:
             values = [pair[1] if logged else pair[0] for pair in pairs]
             if any(v is None for v in values):
                 continue
-            mean, sd = statistics.fmean(values), statistics.stdev(values) if len(values) > 1 else 0.0
-            z = math.inf if sd == 0 else mean / sd
+            centre, sd = statistics.median(values), downside_spread(values)
+            z = math.inf if sd == 0 else centre / sd
             spreads = z if spreads is None else min(spreads, z)
         if not held:
             status = "failed"
