@@ -225,3 +225,22 @@ def test_grpo_and_dpo_are_the_same_for_the_same_seed(small_pieces):
     preferred, rejected = make_preferences(50, np.random.default_rng(3))
     first, again = (train_dpo(model, preferred, rejected, DPOConfig(epochs=1)) for _ in range(2))
     assert np.array_equal(first[0].params, again[0].params) and first[1] == again[1]
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["dpo", "--restricted", "0"], "--restricted must be between 1"),
+        (["grpo", "--iterations", "10"], "--iterations must be at least 30"),
+        (["dpo", "--pairs", "0,10"], "pairs are whole numbers"),
+        (["grpo", "--seeds", "3-1"], "seeds are N or N-M"),
+    ],
+)
+def test_chapter_14s_benchmark_refuses_bad_arguments_in_one_line(argv, message, capsys):
+    from benchmarks import grpo_dpo
+
+    with pytest.raises(SystemExit) as stopped:
+        grpo_dpo.main(argv)
+    assert stopped.value.code == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert message in error[-1] and "Traceback" not in "".join(error)
