@@ -8,7 +8,7 @@ from conftest import assert_close, numerical_gradient
 from minippo.distributions import Categorical
 from minippo.lm import language as lm
 from minippo.lm.dpo import DPOConfig, dpo_loss, dpo_loss_and_grad, response_tokens, sequence_log_probs, train_dpo
-from minippo.lm.grpo import GRPOConfig, group_advantages, grpo_objective, k3, train_grpo
+from minippo.lm.grpo import GRPOConfig, group_advantages, grpo_objective, k2, k3, train_grpo
 from minippo.lm.reward_model import make_preferences
 from minippo.lm.rlhf import (
     all_prompts,
@@ -65,10 +65,51 @@ def test_k3_in_the_loss_follows_the_forward_kl_and_k1_in_the_reward_the_reverse_
     assert np.abs(in_the_loss - reverse).max() > 1e-2  # the two KLs' gradients differ here
 
 
+def test_k2_in_the_loss_follows_the_reverse_kl(rng):
+    """The per-token switch that keeps the KL in the loss but changes its estimator: grpo_objective's gradient with
+    k2, Â = 0, β = 1 and weight 1, taken through log π with the sample held, averages exactly over π = softmax(z) to
+    ∇KL[π ‖ π_ref] (by central finite differences), not to the forward KL's gradient that k3 gives."""
+    z, logits_ref = rng.normal(size=5), rng.normal(size=5)
+    log_ref = logits_ref - np.logaddexp.reduce(logits_ref)
+
+    def log_pi():
+        return z - np.logaddexp.reduce(z)
+
+    grad_log_pi = np.eye(5) - np.exp(log_pi())
+    forward = numerical_gradient(lambda: float(np.exp(log_ref) @ (log_ref - log_pi())), z)
+    reverse = numerical_gradient(lambda: float(np.exp(log_pi()) @ (log_pi() - log_ref)), z)
+    _, grad = grpo_objective(log_pi(), log_pi(), log_ref, np.zeros(5), np.ones(5), 0.2, 1.0, "k2")
+    in_the_loss = np.exp(log_pi()) @ (-grad[:, None] * grad_log_pi)
+    assert_close(in_the_loss, reverse)
+    assert np.abs(in_the_loss - forward).max() > 1e-2
+    assert np.all(k2(log_pi(), log_ref) >= 0.0)
+
+
+def test_grpo_objective_with_k2_matches_finite_differences(rng):
+    """The k2 objective's hand-derived gradient, w_t (surrogate − β log(π_θ/π_ref)), against central differences in
+    float64, with log-ratios far enough from 0 that k3's derivative, a wrong sign or a missing ½ would all show."""
+    n = 12
+    logp_old = np.log(rng.uniform(0.05, 0.9, n))
+    logp = logp_old + rng.normal(0, 0.3, n)
+    logp_ref = logp + rng.normal(0, 1.0, n)
+    advantages, weights = rng.normal(size=n), rng.uniform(0.01, 0.2, n)
+    ratio = np.exp(logp - logp_old)
+    assert np.all(np.abs(ratio - 0.8) > 1e-4) and np.all(np.abs(ratio - 1.2) > 1e-4)  # away from the kinks
+    value, grad = grpo_objective(logp, logp_old, logp_ref, advantages, weights, 0.2, 0.7, "k2")
+    numeric = numerical_gradient(
+        lambda: grpo_objective(logp, logp_old, logp_ref, advantages, weights, 0.2, 0.7, "k2")[0], logp
+    )
+    assert_close(grad, numeric)
+    surrogate, _ = grpo_objective(logp, logp_old, logp_ref, advantages, weights, 0.2, 0.0)
+    assert np.isclose(value, surrogate - 0.7 * np.sum(weights * 0.5 * (logp - logp_ref) ** 2))
+    _, grad_k3 = grpo_objective(logp, logp_old, logp_ref, advantages, weights, 0.2, 0.7)
+    assert np.abs(grad - grad_k3).max() > 1e-3  # the two estimators' gradients differ on these tokens
+
+
 @pytest.mark.parametrize(
     "fields",
-    [dict(normalize_std=False), dict(kl_in="reward"), dict(average_over_tokens=False)],
-    ids=["normalize_std", "kl_in", "average_over_tokens"],
+    [dict(normalize_std=False), dict(kl_in="reward"), dict(average_over_tokens=False), dict(kl_estimator="k2")],
+    ids=["normalize_std", "kl_in", "average_over_tokens", "kl_estimator"],
 )
 def test_each_grpo_switch_changes_the_update(small_pieces, fields):
     model, reward_model, _ = small_pieces
@@ -78,9 +119,11 @@ def test_each_grpo_switch_changes_the_update(small_pieces, fields):
     assert not np.allclose(published.params, switched.params)
 
 
-def test_an_unknown_kl_place_is_an_error():
+def test_an_unknown_kl_place_or_estimator_is_an_error():
     with pytest.raises(ValueError, match="kl_in"):
         GRPOConfig(kl_in="advantage")
+    with pytest.raises(ValueError, match="kl_estimator"):
+        GRPOConfig(kl_estimator="k1")
 
 
 def test_grpo_objective_gradient_matches_finite_differences(rng):
@@ -182,3 +225,22 @@ def test_grpo_and_dpo_are_the_same_for_the_same_seed(small_pieces):
     preferred, rejected = make_preferences(50, np.random.default_rng(3))
     first, again = (train_dpo(model, preferred, rejected, DPOConfig(epochs=1)) for _ in range(2))
     assert np.array_equal(first[0].params, again[0].params) and first[1] == again[1]
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["dpo", "--restricted", "0"], "--restricted must be between 1"),
+        (["grpo", "--iterations", "10"], "--iterations must be at least 30"),
+        (["dpo", "--pairs", "0,10"], "pairs are whole numbers"),
+        (["grpo", "--seeds", "3-1"], "seeds are N or N-M"),
+    ],
+)
+def test_chapter_14s_benchmark_refuses_bad_arguments_in_one_line(argv, message, capsys):
+    from benchmarks import grpo_dpo
+
+    with pytest.raises(SystemExit) as stopped:
+        grpo_dpo.main(argv)
+    assert stopped.value.code == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert message in error[-1] and "Traceback" not in "".join(error)

@@ -74,7 +74,7 @@ LIBRARY_ANSWERS = {
     "ch12_pixels": {"minippo.conv": ["conv2d_forward", "conv2d_backward"]},
     "ch13_language_model": {"minippo.lm.reward_model": ["bradley_terry_loss", "RewardModel"],
                             "minippo.lm.rlhf": ["kl_shaped_rewards", "train_rlhf"]},
-    "ch14_grpo_dpo": {"minippo.lm.grpo": ["group_advantages", "grpo_objective", "k3"],
+    "ch14_grpo_dpo": {"minippo.lm.grpo": ["group_advantages", "grpo_objective", "k3", "kl_estimate_and_grad"],
                       "minippo.lm.dpo": ["dpo_loss", "dpo_loss_and_grad"]},
 }  # fmt: skip
 # what no submission needs: the reference, the tests, the grader

@@ -18,7 +18,10 @@ Munos 2025). So GRPO as published does not aim at the optimum π* ∝ π_ref exp
 switches turn its departures from that objective off one by one, each a variant used in practice: ``normalize_std``
 (the division by the group's std), ``kl_in`` (the KL in the loss, or in the reward as PPO has it) and
 ``average_over_tokens`` (the 1/|y| weight of each response's tokens). With all three off the update is the group-
-baseline policy gradient of chapter 13's objective.
+baseline policy gradient of chapter 13's objective. A fourth, ``kl_estimator="k2"``, keeps the KL in the loss, per
+token, but with k2 = ½ log²(π_θ/π_ref), whose gradient in the loss, log(π_θ/π_ref) per unit of log π_θ, is on average
+the reverse KL's at each token: it separates the estimator from the place of the KL (in the loss each token sees its own
+log-ratio only, where the reward charges it for the tokens after it as well, the partial gradient of Tang & Munos).
 """
 
 from __future__ import annotations
@@ -35,6 +38,8 @@ from minippo.lm.reward_model import RewardModel
 from minippo.lm.rlhf import collect, sequence_stats
 from minippo.minibatches import minibatch_indices
 from minippo.optimizer import Adam, clip_grad_norm
+
+KL_ESTIMATORS = ("k3", "k2")  # the KL estimators GRPOConfig.kl_estimator can put in the loss
 
 
 @dataclass
@@ -59,10 +64,15 @@ class GRPOConfig:
     # weight each response's tokens 1/|y| (Shao et al.'s eq. 3); False: weight 1, the gradient of log π(y) = Σ_t log
     # π(a_t|s_t) of the whole response (Liu et al. 2025); either way the responses are then averaged
     average_over_tokens: bool = True
+    # the estimator of the KL in the loss (kl_in="loss"): "k3" (Shao et al.), whose gradient there follows KL[π_ref ‖
+    # π_θ], or "k2", ½ log²(π_θ/π_ref), whose gradient there follows KL[π_θ ‖ π_ref] token by token
+    kl_estimator: str = "k3"
 
     def __post_init__(self):
         if self.kl_in not in ("loss", "reward"):
             raise ValueError(f"kl_in must be 'loss' or 'reward', not {self.kl_in!r}")
+        if self.kl_estimator not in KL_ESTIMATORS:
+            raise ValueError(f"kl_estimator must be 'k3' or 'k2', not {self.kl_estimator!r}")
 
 
 def group_advantages(scores: np.ndarray, eps: float = 1e-8, normalize_std: bool = True) -> np.ndarray:
@@ -82,17 +92,37 @@ def k3(logp: np.ndarray, logp_ref: np.ndarray) -> np.ndarray:
     return np.exp(log_ratio) - log_ratio - 1.0
 
 
-def grpo_objective(logp, logp_old, logp_ref, advantages, weights, epsilon: float, beta: float):
-    """J = Σ_t w_t [min(r_t Â_t, clip(r_t, 1−ε, 1+ε) Â_t) − β k3_t], with r_t = π_θ/π_θold and w_t the weight of
-    token t (1 / (responses × the length of its response), so that each response counts once).
+def k2(logp: np.ndarray, logp_ref: np.ndarray) -> np.ndarray:
+    """k2 = ½ log²(π/π_ref) per token, never negative; its gradient as a loss, log(π/π_ref) per unit of log π, has
+    the expectation under π of the gradient of KL[π ‖ π_ref] (its value is a biased estimate of that KL)."""
+    return 0.5 * (logp - logp_ref) ** 2
 
-    Returns (J, ∂J/∂ log π_θ): w_t (r_t Â_t where the unclipped term is the smaller, else 0, − β (1 − π_ref/π_θ)).
+
+def kl_estimate_and_grad(logp, logp_ref, estimator: str = "k3"):
+    """The per-token KL estimate of ``estimator`` ("k3" or "k2") and its derivative with respect to log π_θ:
+    k3: 1 − π_ref/π_θ;  k2: log(π_θ/π_ref)."""
+    if estimator == "k3":
+        return k3(logp, logp_ref), 1.0 - np.exp(logp_ref - logp)
+    if estimator == "k2":
+        return k2(logp, logp_ref), logp - logp_ref
+    raise ValueError(f"estimator must be 'k3' or 'k2', not {estimator!r}")
+
+
+
+def grpo_objective(logp, logp_old, logp_ref, advantages, weights, epsilon: float, beta: float, estimator="k3"):
+    """J = Σ_t w_t [min(r_t Â_t, clip(r_t, 1−ε, 1+ε) Â_t) − β k_t], with r_t = π_θ/π_θold, k_t the KL estimate
+    (k3 by default, or k2) and w_t the weight of token t (1 / (responses × the length of its response), so that each
+    response counts once).
+
+    Returns (J, ∂J/∂ log π_θ): w_t (r_t Â_t where the unclipped term is the smaller, else 0, − β ∂k_t/∂ log π_θ),
+    with ∂k3/∂ log π_θ = 1 − π_ref/π_θ and ∂k2/∂ log π_θ = log(π_θ/π_ref).
     """
     ratio = np.exp(logp - logp_old)
     unclipped = ratio * advantages
     clipped = np.clip(ratio, 1.0 - epsilon, 1.0 + epsilon) * advantages
-    value = float(np.sum(weights * (np.minimum(unclipped, clipped) - beta * k3(logp, logp_ref))))
-    grad = weights * (np.where(unclipped <= clipped, unclipped, 0.0) - beta * (1.0 - np.exp(logp_ref - logp)))
+    kl, kl_grad = kl_estimate_and_grad(logp, logp_ref, estimator)
+    value = float(np.sum(weights * (np.minimum(unclipped, clipped) - beta * kl)))
+    grad = weights * (np.where(unclipped <= clipped, unclipped, 0.0) - beta * kl_grad)
     return value, grad
 
 
@@ -109,6 +139,7 @@ def grpo_step(policy, optimizer: Adam, minibatch: dict, config: GRPOConfig) -> f
         minibatch["weights"],
         config.clip_epsilon,
         config.beta if config.kl_in == "loss" else 0.0,
+        config.kl_estimator,
     )
     (grad_logits,) = dist.log_prob_backward(minibatch["actions"], -grad_logp)  # minimise −J
     policy.backward(cache, grad_logits)
