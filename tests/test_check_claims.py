@@ -218,7 +218,7 @@ def test_report_judges_the_record_without_running_anything(tmp_path, capsys):
         writer.writerows(_rows([0.5 + (0.3 if k % 2 else -0.3) for k in range(16)]))
     assert check_claims.main(["--report", "--out", str(out)]) == 1
     printed = capsys.readouterr().out
-    assert "| thin |" in printed and "rule: held on all 16 draws and mean slack >= 3.85 sd" in printed
+    assert "| thin |" in printed and "rule: held on all 16 draws and median slack >= 3.85 sd" in printed
 
 
 @pytest.mark.timeout(180)

@@ -431,7 +431,7 @@ def summary(judged: list[dict]) -> str:
         )
     draws = max((c["draws"] for c in judged), default=0)
     if draws >= FEWEST_DRAWS:
-        lines.append(f"rule: held on all {draws} draws and mean slack >= {needed_spreads(draws):.2f} sd")
+        lines.append(f"rule: held on all {draws} draws and median slack >= {needed_spreads(draws):.2f} sd")
     return "\n".join(lines)
 
 
