@@ -23,6 +23,17 @@ VALUE_CASES = [
 ]
 
 
+@pytest.mark.parametrize("n", [1, 7])
+def test_value_loss_value_and_gradient(student, rng, n):
+    values, targets = rng.normal(size=n), rng.normal(size=n)
+    loss, grad = call_checking_inputs(student.value_loss, "value_loss", values, targets)
+    expected = sum(0.5 * (v - g) ** 2 for v, g in zip(values, targets)) / n
+    check_close(check_scalar(loss, "value_loss"), expected, "value_loss", "the loss ½ Ê[(V − V^targ)²]")
+    check_array(grad, "value_loss", (n,), "the gradient")
+    numeric = numerical_gradient(lambda: float(student.value_loss(values, targets)[0]), values)
+    check_close(grad, numeric, "value_loss", "∂L^VF/∂V (checked by finite differences; it should be (V − V^targ)/n)")
+
+
 @pytest.mark.parametrize("v, v_old, target, epsilon, case", VALUE_CASES, ids=[str(i) for i in range(len(VALUE_CASES))])
 def test_clipped_value_loss_one_sample(student, v, v_old, target, epsilon, case):
     loss, grad = student.clipped_value_loss(np.array([v]), np.array([target]), np.array([v_old]), epsilon)
@@ -47,17 +58,6 @@ def test_clipped_value_loss_one_sample(student, v, v_old, target, epsilon, case)
     expect_number(
         grad, expected_grad, "clipped_value_loss", f"the gradient for {sample}", case, alternatives=grad_mistakes
     )
-
-
-@pytest.mark.parametrize("n", [1, 7])
-def test_value_loss_value_and_gradient(student, rng, n):
-    values, targets = rng.normal(size=n), rng.normal(size=n)
-    loss, grad = call_checking_inputs(student.value_loss, "value_loss", values, targets)
-    expected = sum(0.5 * (v - g) ** 2 for v, g in zip(values, targets)) / n
-    check_close(check_scalar(loss, "value_loss"), expected, "value_loss", "the loss ½ Ê[(V − V^targ)²]")
-    check_array(grad, "value_loss", (n,), "the gradient")
-    numeric = numerical_gradient(lambda: float(student.value_loss(values, targets)[0]), values)
-    check_close(grad, numeric, "value_loss", "∂L^VF/∂V (checked by finite differences; it should be (V − V^targ)/n)")
 
 
 def reference_clipped_value_loss(values, targets, values_old, epsilon):
