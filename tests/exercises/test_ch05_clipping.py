@@ -70,10 +70,15 @@ def test_clipped_surrogate_one_sample(student, ratio, advantage, epsilon):
     inverse = 1 / ratio
     swapped = "r computed as π_old/π (log π and log π_old swapped)"
     fixed = "ε fixed at 0.2 (the epsilon argument ignored)"
+    the_min = "the min's asymmetric value and gradient: that is chapter 6's L^CLIP, not the clipped term alone"
+    helps = (advantage > 0 and ratio <= 1 + epsilon) or (advantage < 0 and ratio >= 1 - epsilon)
+    # the likeliest mistake first (the order the grader's own wrong variants make them); ε fixed last: it only shows
+    # for ε ≠ 0.2, and its numbers coincide with other mistakes'
     value_mistakes = {
-        fixed: clip(ratio, 0.8, 1.2) * advantage if epsilon != 0.2 else None,
-        swapped: clip(inverse, 1 - epsilon, 1 + epsilon) * advantage,
+        the_min: min(ratio * advantage, clip(ratio, 1 - epsilon, 1 + epsilon) * advantage),
         "r Â, the ratio unclipped": ratio * advantage,
+        swapped: clip(inverse, 1 - epsilon, 1 + epsilon) * advantage,
+        fixed: clip(ratio, 0.8, 1.2) * advantage if epsilon != 0.2 else None,
     }
     expected_value = clip(ratio, 1 - epsilon, 1 + epsilon) * advantage
     why = f"clip(r, 1 − ε, 1 + ε) Â, r is {place}"
@@ -82,9 +87,10 @@ def test_clipped_surrogate_one_sample(student, ratio, advantage, epsilon):
     )
     check_array(grad, "clipped_surrogate", (1,), f"the gradient for {sample}")
     grad_mistakes = {
-        fixed: (ratio * advantage if abs(ratio - 1) < 0.2 else 0.0) if epsilon != 0.2 else None,
-        swapped: inverse * advantage if abs(inverse - 1) < epsilon else 0.0,
+        the_min: ratio * advantage if helps else 0.0,
         "the gradient of the unclipped r Â, as if the clip were not there": None if inside else ratio * advantage,
+        swapped: inverse * advantage if abs(inverse - 1) < epsilon else 0.0,
+        fixed: (ratio * advantage if abs(ratio - 1) < 0.2 else 0.0) if epsilon != 0.2 else None,
     }
     why = f"r Â, since r is {place}" if inside else f"clip(r) is a constant there: r is {place}"
     expected_grad = ratio * advantage if inside else 0.0
@@ -143,6 +149,24 @@ def test_clip_fraction_at_the_edges_of_the_band(student):
         f"clip_fraction: for r = 1.25, 0.75, 1.5 and 1 with ε = 0.25 the fraction should be 0.25 (only r = 1.5 is "
         f"outside; r = 1.25 and 0.75 lie exactly on the edges, |r − 1| = ε, which is not > ε), not {fraction:.6g}"
         + (": |r − 1| ≥ ε where the contract says > ε?" if fraction == 0.75 else "")
+    )
+
+
+def test_clipped_surrogate_on_the_edges_of_the_band(student):
+    # ε = 0.25 and r = 1.25 or 0.75 exactly: the contract's band is closed, so a ratio on an edge is inside it and
+    # keeps its gradient r Â / n (the derivative does not exist there; the contract picks this side, as clip_fraction
+    # does when it does not count such a ratio)
+    logp = np.array([exact_log_ratio(1.25), exact_log_ratio(0.75)])
+    advantages = np.array([1.0, -1.0])
+    _, grad = student.clipped_surrogate(logp, np.zeros(2), advantages, 0.25)
+    check_array(grad, "clipped_surrogate", (2,), "the gradient")
+    expected = np.array([1.25, -0.75]) / 2
+    on_edge = [abs(grad[i] - expected[i]) > 1e-12 for i in range(2)]
+    assert not any(on_edge), (
+        f"clipped_surrogate: for r = 1.25 and 0.75 exactly on the edges of the band (ε = 0.25, Â = 1 and −1) the "
+        f"gradient should be r Â / n = {expected.tolist()} (the band is closed: |r − 1| = ε is inside), not "
+        f"{grad.tolist()}"
+        + (": the open band 1 − ε < r < 1 + ε where the contract says ≤?" if np.all(grad == 0) else "")
     )
 
 

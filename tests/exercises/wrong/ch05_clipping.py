@@ -140,6 +140,30 @@ VARIANTS.update(
     }
 )
 
+def clipped_surrogate_open_band(logp, logp_old, advantages, epsilon):
+    """The gradient passed on the open band 1 − ε < r < 1 + ε only: a ratio exactly on an edge loses its gradient,
+    where the contract's closed band keeps it."""
+    ratio = np.exp(logp - logp_old)
+    inside = (ratio > 1.0 - epsilon) & (ratio < 1.0 + epsilon)
+    value = np.mean(np.minimum(np.maximum(ratio, 1.0 - epsilon), 1.0 + epsilon) * advantages)
+    return float(value), np.where(inside, ratio * advantages, 0.0) / len(ratio)
+
+
+def clipped_with_the_min(logp, logp_old, advantages, epsilon):
+    """The chapter's L^CLIP, min(r Â, clip(r) Â), with its asymmetric gradient, where the clipped term is asked."""
+    ratio = np.exp(logp - logp_old)
+    unclipped, clipped = ratio * advantages, np.clip(ratio, 1 - epsilon, 1 + epsilon) * advantages
+    grad = np.where(unclipped <= clipped, unclipped, 0.0) / len(logp)
+    return float(np.mean(np.minimum(unclipped, clipped))), grad
+
+
+VARIANTS.update(
+    {
+        "clipped_surrogate_open_band": {"clipped_surrogate": clipped_surrogate_open_band},
+        "clipped_with_the_min": {"clipped_surrogate": clipped_with_the_min},
+    }
+)
+
 # what the first failing test's message must say (a regular expression), so that the scoreboard names the mistake
 FIRST_FAILURE = {
     "clipped_gradient_not_zeroed": r"gradient for one sample with r = 1\.5.*should be 0",
@@ -159,4 +183,6 @@ FIRST_FAILURE = {
     "clip_fraction_epsilon_fixed": r"r = 1\.15 and ε = 0\.1",
     "clip_fraction_of_the_inverse_ratio": r"r = 0\.83 .*should be 0, not 1.*π_old/π",
     "clip_fraction_at_least_epsilon": r"exactly on the edges.*≥ ε",
+    "clipped_surrogate_open_band": r"exactly on the edges.*open band",
+    "clipped_with_the_min": r"r = 0\.5, .*should be 0\.8.*: the min's asymmetric .*chapter 6's L\^CLIP",
 }
