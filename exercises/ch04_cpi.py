@@ -17,7 +17,7 @@ EXERCISES = ["importance_ratio", "cpi_objective"]
 
 
 def importance_ratio(logp: np.ndarray, logp_old: np.ndarray) -> np.ndarray:
-    """r_t = π_θ(a_t|s_t) / π_θold(a_t|s_t), computed from log-probabilities as exp(log π_θ − log π_θold).
+    """r_t = π_θ(a_t|s_t) / π_θold(a_t|s_t), the book's (4.2), from the two log-probabilities.
 
     logp, logp_old: (n,).  Returns (n,), finite and correct even when both log-probabilities are very negative
     (−800 and −801 give e, although exp(−800) underflows to 0).
@@ -26,10 +26,10 @@ def importance_ratio(logp: np.ndarray, logp_old: np.ndarray) -> np.ndarray:
 
 
 def cpi_objective(logp: np.ndarray, logp_old: np.ndarray, advantages: np.ndarray):
-    """L^CPI = Ê_t[r_t(θ) Â_t]  (eq. 6).
+    """L^CPI, the paper's eq. 6 (the book's (4.3)), the mean over the batch, and its gradient.
 
     logp: (n,) log π_θ, the variable.  logp_old: (n,) log π_θold, a constant.  advantages: (n,) constants.
-    Returns (value, grad): value a float; grad = ∂L^CPI/∂ log π_t = r_t Â_t / n, shape (n,), because
-    ∂r_t/∂ log π_t = r_t. At θ = θ_old (r = 1) it equals the policy gradient of L^PG.
+    Returns (value, grad): value a float; grad = ∂L^CPI/∂ log π_θ(a_t|s_t), shape (n,). At θ = θ_old it must equal
+    the gradient of L^PG.
     """
     raise NotImplementedError("write cpi_objective, then run: minippo grade 4")

@@ -37,13 +37,10 @@ def loss_and_grad(agent, minibatch: dict, config) -> float:
     "advantages" (Â_t), "returns" (V^targ_t); ignore any other keys.
     config: a minippo.ppo.Config; use clip_epsilon (ε), value_coef (c1), entropy_coef (c2), normalize_advantages,
     whatever their values (the tests change each of them).
-        1. Â ← (Â − mean Â) / (std Â + 1e-8) over this minibatch, if config.normalize_advantages and n > 1 (np.std,
-           the population standard deviation; chapter 3)
-        2. L^CLIP with ε and its gradient in log π                                     (chapter 6)
-        3. L^VF = ½ Ê[(V − V^targ)²] and its gradient in V (no value clipping here)     (chapter 8)
-        4. S = Ê[entropy of π_θ(·|s_t)], only when c2 ≠ 0                               (chapter 2)
-        5. loss = −(L^CLIP − c1 L^VF + c2 S); carry ∂loss/∂ log π and ∂loss/∂S back through the distribution (add up
-           what their *_backward return), then call agent.backward with those and ∂loss/∂V.
+    The pieces: the advantages normalised over this minibatch as chapter 3's normalize_advantages does, when
+    config.normalize_advantages and n > 1; L^CLIP (chapter 6); L^VF with chapter 8's ½ and no value clipping; the mean
+    entropy S of π_θ(·|s_t) (chapter 2), computed only when c2 ≠ 0. Carry the loss's gradient back through the
+    distribution and the network (the agent's methods above) into agent.grads.
     Returns the loss as a float; agent.grads holds ∂loss/∂θ afterwards. agent.params and the minibatch are unchanged.
     """
     raise NotImplementedError("write loss_and_grad, then run: minippo grade 10")

@@ -19,11 +19,7 @@ EXERCISES = ["conv2d_forward", "conv2d_backward"]
 
 
 def conv2d_forward(x: np.ndarray, K: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The valid cross-correlation of a batch of images with F kernels, plus a bias per kernel:
-
-        y[n, i, j, f] = b[f] + Σ_{p, q, c} x[n, i + p, j + q, c] K[p, q, c, f]
-
-    for 0 ≤ i < H − kh + 1 and 0 ≤ j < W − kw + 1, the sum over 0 ≤ p < kh, 0 ≤ q < kw and every input channel c.
+    """The valid cross-correlation of a batch of images with F kernels, plus a bias per kernel: the book's (12.1).
 
     x: (n, H, W, C) images, channels last.  K: (kh, kw, C, F); kh ≤ H and kw ≤ W, not necessarily square.  b: (F,).
     Returns y, (n, H − kh + 1, W − kw + 1, F) float64, a new array.
@@ -32,14 +28,7 @@ def conv2d_forward(x: np.ndarray, K: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def conv2d_backward(x: np.ndarray, K: np.ndarray, grad_y: np.ndarray, need_grad_x: bool = True):
-    """Given grad_y = ∂L/∂y for y = conv2d_forward(x, K, b), return (∂L/∂x, ∂L/∂K, ∂L/∂b):
-
-        ∂L/∂K[p, q, c, f] = Σ_{n, i, j} x[n, i + p, j + q, c] ∂L/∂y[n, i, j, f]
-        ∂L/∂b[f]          = Σ_{n, i, j} ∂L/∂y[n, i, j, f]
-        ∂L/∂x[n, a, e, c] = Σ_{p, q, f} ∂L/∂y[n, a − p, e − q, f] K[p, q, c, f],
-
-    the last sum over the (p, q) for which (a − p, e − q) is an output pixel: an input pixel lies in the receptive
-    field of up to kh·kw output pixels, and it receives the gradient of every one of them (they add up).
+    """Given grad_y = ∂L/∂y for y = conv2d_forward(x, K, b), return (∂L/∂x, ∂L/∂K, ∂L/∂b): the book's (12.2) and (12.3).
 
     x: (n, H, W, C).  K: (kh, kw, C, F).  grad_y: (n, H − kh + 1, W − kw + 1, F).  Returns grad_x (n, H, W, C), or
     None when need_grad_x is False (the first layer's input needs no gradient); grad_K (kh, kw, C, F); grad_b (F,);
