@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 EXERCISES = ["linear_backward", "tanh_backward", "mlp_forward", "mlp_backward", "adam_step"]
+TRANSFER = ["layer_norm_backward"]  # the chapter's idea applied to a case the book has not shown
 
 
 def linear_backward(x: np.ndarray, W: np.ndarray, grad_y: np.ndarray):
@@ -77,3 +78,17 @@ def adam_step(
     Returns (new_params, new_m, new_v) as new arrays; params, m and v themselves are left unchanged.
     """
     raise NotImplementedError("write adam_step, then run: minippo grade 1")
+
+
+def layer_norm_backward(x: np.ndarray, gain: np.ndarray, grad_y: np.ndarray):
+    """Transfer task: the backward pass of layer normalisation, a layer this chapter has not shown.
+
+    Forward (given): each row of x is standardised with its own mean and variance, then scaled by a gain per column,
+        x̂[i] = (x[i] − mean(x[i])) / sqrt(var(x[i]) + 1e-5),   y[i] = gain · x̂[i],
+    var the population variance (np.var). Both the mean and the variance depend on every entry of the row.
+
+    x: (n, d), d ≥ 2.  gain: (d,).  grad_y: (n, d), ∂L/∂y.
+    Returns (grad_x, grad_gain) = (∂L/∂x of shape (n, d), ∂L/∂gain of shape (d,)), new float64 arrays. Derive them
+    with the chain rule as chapter 1 does for the linear layer and tanh.
+    """
+    raise NotImplementedError("write layer_norm_backward, then run: minippo grade 1")

@@ -27,6 +27,7 @@ EXERCISES = [
     "gaussian_entropy",
     "gaussian_entropy_backward",
 ]
+TRANSFER = ["tempered_categorical_log_prob"]  # the chapter's idea applied to a case the book has not shown
 
 LOG_2PI = float(np.log(2.0 * np.pi))  # log 2π, in every Gaussian log-density
 
@@ -106,3 +107,14 @@ def gaussian_entropy_backward(mean: np.ndarray, log_std: np.ndarray, grad_entrop
     log σ shared by all rows as in gaussian_log_prob_backward.
     """
     raise NotImplementedError("write gaussian_entropy_backward, then run: minippo grade 2")
+
+
+def tempered_categorical_log_prob(logits: np.ndarray, temperature: float, actions: np.ndarray):
+    """Transfer task: a categorical policy with a temperature τ, π = softmax(z / τ), and its score.
+
+    logits: (n, k).  temperature: τ > 0, one number shared by every row.  actions: (n,) integers in 0..k−1.
+    Returns (logp, grad_logits, grad_temperature): logp (n,) the log-probability of each row's action;
+    grad_logits (n, k) = ∂ log π(a_n|s_n)/∂z_n; grad_temperature (n,) = ∂ log π(a_n|s_n)/∂τ, one per row (not summed).
+    Finite for logits of ±1000 with τ ≥ 0.5. τ = 1 is chapter 2's categorical.
+    """
+    raise NotImplementedError("write tempered_categorical_log_prob, then run: minippo grade 2")

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 EXERCISES = ["pg_objective", "normalize_advantages"]
+TRANSFER = ["linear_softmax_policy_gradient"]  # the chapter's idea applied to a case the book has not shown
 
 
 def pg_objective(logp: np.ndarray, advantages: np.ndarray):
@@ -34,3 +35,13 @@ def normalize_advantages(advantages: np.ndarray) -> np.ndarray:
     return it unchanged (a copy).
     """
     raise NotImplementedError("write normalize_advantages, then run: minippo grade 3")
+
+
+def linear_softmax_policy_gradient(features: np.ndarray, theta: np.ndarray, actions: np.ndarray, advantages):
+    """Transfer task: L^PG's gradient carried all the way to the parameters of a linear softmax policy.
+
+    The policy: π_θ(·|s_t) = softmax(s_t θ), features s_t one row of ``features``.
+    features: (n, d).  theta: (d, k).  actions: (n,) integers in 0..k−1.  advantages: (n,) Â_t, constants.
+    Returns (value, grad): value = L^PG (eq. 2, the mean over the batch) as a float; grad = ∂L^PG/∂θ, (d, k).
+    """
+    raise NotImplementedError("write linear_softmax_policy_gradient, then run: minippo grade 3")

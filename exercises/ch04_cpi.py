@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 EXERCISES = ["importance_ratio", "cpi_objective"]
+TRANSFER = ["weighted_cpi_objective"]  # the chapter's idea applied to a case the book has not shown
 
 
 def importance_ratio(logp: np.ndarray, logp_old: np.ndarray) -> np.ndarray:
@@ -33,3 +34,16 @@ def cpi_objective(logp: np.ndarray, logp_old: np.ndarray, advantages: np.ndarray
     the gradient of L^PG.
     """
     raise NotImplementedError("write cpi_objective, then run: minippo grade 4")
+
+
+def weighted_cpi_objective(logp: np.ndarray, logp_old: np.ndarray, advantages: np.ndarray):
+    """Transfer task: the importance-weighted surrogate with *self-normalised* weights, and its gradient.
+
+    The value: Σ_t r_t Â_t / Σ_t r_t, the ratios r_t of chapter 4 normalised to sum to one over the batch (weighted
+    importance sampling: a biased estimate with a smaller variance than L^CPI's mean). Every r_t enters the
+    denominator too.
+    logp: (n,) the variable.  logp_old, advantages: (n,) constants.
+    Returns (value, grad): value a float, finite for log-probabilities near −800; grad = ∂value/∂ log π_θ(a_t|s_t),
+    shape (n,).
+    """
+    raise NotImplementedError("write weighted_cpi_objective, then run: minippo grade 4")

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 EXERCISES = ["clip_objective"]
+TRANSFER = ["clip_objective_logits_gradient"]  # the chapter's idea applied to a case the book has not shown
 
 
 def clip_objective(logp: np.ndarray, logp_old: np.ndarray, advantages: np.ndarray, epsilon: float):
@@ -25,3 +26,14 @@ def clip_objective(logp: np.ndarray, logp_old: np.ndarray, advantages: np.ndarra
     shape (n,). Where the two terms of the min are equal, use the unclipped term's derivative.
     """
     raise NotImplementedError("write clip_objective, then run: minippo grade 6")
+
+
+def clip_objective_logits_gradient(logits, actions, logp_old, advantages, epsilon: float):
+    """Transfer task: L^CLIP for a categorical policy, differentiated all the way to its logits.
+
+    logits: (n, k) z, the variable; π_θ(·|s_t) = softmax(z_t).  actions: (n,) integers.  logp_old, advantages: (n,)
+    constants.  epsilon: ε > 0.
+    Returns (value, grad): value = L^CLIP (eq. 7) on the batch, a float; grad = ∂L^CLIP/∂z, shape (n, k). Where the two
+    terms of the min are equal, take the unclipped term's derivative, as clip_objective does.
+    """
+    raise NotImplementedError("write clip_objective_logits_gradient, then run: minippo grade 6")

@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 EXERCISES = ["discounted_returns", "td_residuals", "gae"]
+TRANSFER = ["gae_with_step_discounts"]  # the chapter's idea applied to a case the book has not shown
 
 
 def discounted_returns(rewards, next_values, terminated, truncated, gamma: float) -> np.ndarray:
@@ -51,3 +52,15 @@ def gae(rewards, values, next_values, terminated, truncated, gamma: float, lam: 
     discounted return minus V(s_t).
     """
     raise NotImplementedError("write gae, then run: minippo grade 7")
+
+
+def gae_with_step_discounts(rewards, values, next_values, terminated, truncated, gammas, lam: float) -> np.ndarray:
+    """Transfer task: GAE when every step has its own discount, as when steps last different times (γ_t = γ^{Δt_t}).
+
+    gammas[t] discounts what follows step t: its bootstrap V(s_{t+1}) and everything after it. With every
+    gammas[t] = γ this is chapter 7's gae. The flags, the bootstrap at a truncation or at the batch's last step and
+    the episode ends are gae's.
+    rewards, values, next_values, gammas: (T,) floats.  terminated, truncated: (T,) bools.  lam: λ.
+    Returns Â, a new (T,) float64 array.
+    """
+    raise NotImplementedError("write gae_with_step_discounts, then run: minippo grade 7")

@@ -17,6 +17,7 @@ import numpy as np
 from minippo.losses import clip_objective  # noqa: F401 - for your solution
 
 EXERCISES = ["value_loss", "clipped_value_loss", "clip_vf_s_objective"]
+TRANSFER = ["huber_value_loss"]  # the chapter's idea applied to a case the book has not shown
 
 
 def value_loss(values: np.ndarray, value_targets: np.ndarray):
@@ -60,3 +61,15 @@ def clip_vf_s_objective(
     shape (n,).
     """
     raise NotImplementedError("write clip_vf_s_objective, then run: minippo grade 8")
+
+
+def huber_value_loss(values: np.ndarray, value_targets: np.ndarray, delta: float):
+    """Transfer task: a value loss that grows linearly for large errors, and its gradient.
+
+    The Huber loss (Huber 1964) of each error e_t = V_t − V^targ_t with threshold δ > 0: ½ e² where |e| ≤ δ, and
+    beyond it the straight line that continues ½ e² with the same value and slope at |e| = δ. The loss is its mean
+    over the batch, a loss to *minimise*.
+    values: (n,) the variable.  value_targets: (n,) constants.  delta: δ > 0.
+    Returns (loss, grad): loss a float; grad = ∂loss/∂V_t, shape (n,).
+    """
+    raise NotImplementedError("write huber_value_loss, then run: minippo grade 8")

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 EXERCISES = ["categorical_kl", "categorical_kl_backward", "kl_penalty_objective", "adaptive_beta"]
+TRANSFER = ["reverse_kl_backward"]  # the chapter's idea applied to a case the book has not shown
 
 
 def log_softmax(logits: np.ndarray) -> np.ndarray:
@@ -57,3 +58,13 @@ def adaptive_beta(beta: float, kl: float, kl_target: float) -> float:
     beta: the current β.  kl: d.  kl_target: d_targ.  Returns the new β as a float.
     """
     raise NotImplementedError("write adaptive_beta, then run: minippo grade 9")
+
+
+def reverse_kl_backward(logits_old: np.ndarray, logits: np.ndarray, grad_kl: np.ndarray):
+    """Transfer task: the other KL, KL[π ‖ π_old] (the new policy first), and its gradient in the new logits.
+
+    logits_old, logits: (n, k).  grad_kl: (n,), ∂L/∂KL_n.
+    Returns (kl, grad_logits): kl (n,) = KL[π(·|s_n) ‖ π_old(·|s_n)] per row, ≥ 0, finite for logits of ±1000;
+    grad_logits (n, k) = ∂L/∂z for the new logits z (the old policy a constant).
+    """
+    raise NotImplementedError("write reverse_kl_backward, then run: minippo grade 9")

@@ -28,6 +28,7 @@ from minippo import losses  # noqa: F401 - for your solution
 from minippo.optimizer import clip_grad_norm  # noqa: F401 - for your solution
 
 EXERCISES = ["loss_and_grad", "ppo_update", "collect"]
+TRANSFER = ["shared_trunk_gradient"]  # the chapter's idea applied to a case the book has not shown
 
 
 def loss_and_grad(agent, minibatch: dict, config) -> float:
@@ -113,3 +114,19 @@ def collect(policy, envs, obs_normalizer, raw_obs, horizon: int, action_bounds=N
         "raw_obs" (N, obs_dim) float64           s_T, raw: where the next call starts
     """
     raise NotImplementedError("write collect, then run: minippo grade 10")
+
+
+def shared_trunk_gradient(
+    features, policy_weights, value_weights, actions, logp_old, advantages, returns, epsilon: float, value_coef: float
+):
+    """Transfer task: where the policy's and the value's gradients meet, the output of a shared trunk.
+
+    A trunk (not given) maps each observation to features h_t; two linear heads read them: the logits
+    z_t = h_t W_π of a categorical policy, and the value V_t = h_t w_V.
+    features: (n, d) h, the variable.  policy_weights: (d, k) W_π.  value_weights: (d,) w_V.  actions: (n,) integers.
+    logp_old, advantages, returns: (n,) log π_θold(a_t|s_t), Â_t (used as given, not normalised) and V^targ_t.
+    epsilon: ε of L^CLIP.  value_coef: c1.  No entropy bonus here.
+    Returns (loss, grad_features): the loss to minimise, −(L^CLIP − c1 L^VF) with chapter 8's L^VF (its ½), as a
+    float, and ∂loss/∂h, shape (n, d).
+    """
+    raise NotImplementedError("write shared_trunk_gradient, then run: minippo grade 10")

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 EXERCISES = ["conv2d_forward", "conv2d_backward"]
+TRANSFER = ["max_pool2d_backward"]  # the chapter's idea applied to a case the book has not shown
 
 
 def conv2d_forward(x: np.ndarray, K: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -35,3 +36,15 @@ def conv2d_backward(x: np.ndarray, K: np.ndarray, grad_y: np.ndarray, need_grad_
     all float64 and new arrays.
     """
     raise NotImplementedError("write conv2d_backward, then run: minippo grade 12")
+
+
+def max_pool2d_backward(x: np.ndarray, size: int, grad_y: np.ndarray) -> np.ndarray:
+    """Transfer task: the backward pass of max pooling, a layer this chapter's network does not have.
+
+    Forward (given): each channel of each image is cut into non-overlapping size × size windows (H and W multiples of
+    size), and y[n, i, j, c] = max over the window's pixels x[n, size·i + p, size·j + q, c], 0 ≤ p, q < size.
+    x: (n, H, W, C).  size: the window's side.  grad_y: (n, H / size, W / size, C), ∂L/∂y.
+    Returns ∂L/∂x, (n, H, W, C), a new float64 array. Where a window's maximum is reached by several pixels, the
+    gradient goes to the first of them in row-major order (smallest p, then smallest q), as np.argmax picks it.
+    """
+    raise NotImplementedError("write max_pool2d_backward, then run: minippo grade 12")

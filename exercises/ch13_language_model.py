@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 EXERCISES = ["bradley_terry_loss", "kl_shaped_rewards"]
+TRANSFER = ["plackett_luce_loss"]  # the chapter's idea applied to a case the book has not shown
 
 
 def bradley_terry_loss(scores_preferred: np.ndarray, scores_rejected: np.ndarray):
@@ -34,3 +35,16 @@ def kl_shaped_rewards(logp, logp_ref, scores, lengths, beta: float) -> np.ndarra
     Returns (n, T).
     """
     raise NotImplementedError("write kl_shaped_rewards, then run: minippo grade 13")
+
+
+def plackett_luce_loss(scores: np.ndarray):
+    """Transfer task: Bradley–Terry's model extended from a pair to a ranking of K responses (Plackett–Luce).
+
+    Each row of scores holds the reward model's scores of K responses to one prompt, ranked best first (column 0 the
+    best). The model picks the best response with probability softmax over all K scores, then the next best among
+    those left, and so on; the probability of the ranking is the product of these K − 1 choices. The loss is the mean
+    over the n rows of the negative log-probability of their ranking. K = 2 is the Bradley–Terry loss.
+    scores: (n, K), K ≥ 2.  Returns (loss, grad): the loss as a float and ∂loss/∂scores, (n, K). Finite for scores
+    of ±1000.
+    """
+    raise NotImplementedError("write plackett_luce_loss, then run: minippo grade 13")

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 EXERCISES = ["linear_backward", "tanh_backward", "mlp_forward", "mlp_backward", "adam_step"]
+TRANSFER = ["layer_norm_backward"]  # the chapter's idea applied to a case the book has not shown
 
 
 def linear_backward(x: np.ndarray, W: np.ndarray, grad_y: np.ndarray):
@@ -98,3 +99,23 @@ def adam_step(
     v_hat = new_v / (1.0 - beta2**t)
     new_params = params - lr * m_hat / (np.sqrt(v_hat) + eps)
     return new_params, new_m, new_v
+
+
+def layer_norm_backward(x: np.ndarray, gain: np.ndarray, grad_y: np.ndarray):
+    """Transfer task: the backward pass of layer normalisation, a layer this chapter has not shown.
+
+    Forward (given): each row of x is standardised with its own mean and variance, then scaled by a gain per column,
+        x̂[i] = (x[i] − mean(x[i])) / sqrt(var(x[i]) + 1e-5),   y[i] = gain · x̂[i],
+    var the population variance (np.var). Both the mean and the variance depend on every entry of the row.
+
+    x: (n, d), d ≥ 2.  gain: (d,).  grad_y: (n, d), ∂L/∂y.
+    Returns (grad_x, grad_gain) = (∂L/∂x of shape (n, d), ∂L/∂gain of shape (d,)), new float64 arrays. Derive them
+    with the chain rule as chapter 1 does for the linear layer and tanh.
+    """
+    centred = x - x.mean(axis=1, keepdims=True)
+    inv_std = 1.0 / np.sqrt((centred * centred).mean(axis=1, keepdims=True) + 1e-5)
+    x_hat = centred * inv_std
+    g = grad_y * gain
+    # the mean's and the variance's own dependence on the row take out g's mean and its projection on x̂
+    grad_x = inv_std * (g - g.mean(axis=1, keepdims=True) - x_hat * (g * x_hat).mean(axis=1, keepdims=True))
+    return grad_x, (grad_y * x_hat).sum(axis=0)

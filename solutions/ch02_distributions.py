@@ -26,6 +26,7 @@ EXERCISES = [
     "gaussian_entropy",
     "gaussian_entropy_backward",
 ]
+TRANSFER = ["tempered_categorical_log_prob"]  # the chapter's idea applied to a case the book has not shown
 
 LOG_2PI = float(np.log(2.0 * np.pi))  # log 2π, in every Gaussian log-density
 
@@ -119,3 +120,24 @@ def gaussian_entropy_backward(mean: np.ndarray, log_std: np.ndarray, grad_entrop
     log σ shared by all rows as in gaussian_log_prob_backward.
     """
     return np.zeros_like(mean, dtype=np.float64), np.full(log_std.shape, float(np.sum(grad_entropy)))
+
+
+def tempered_categorical_log_prob(logits: np.ndarray, temperature: float, actions: np.ndarray):
+    """Transfer task: a categorical policy with a temperature τ, π = softmax(z / τ), and its score.
+
+    logits: (n, k).  temperature: τ > 0, one number shared by every row.  actions: (n,) integers in 0..k−1.
+    Returns (logp, grad_logits, grad_temperature): logp (n,) the log-probability of each row's action;
+    grad_logits (n, k) = ∂ log π(a_n|s_n)/∂z_n; grad_temperature (n,) = ∂ log π(a_n|s_n)/∂τ, one per row (not summed).
+    Finite for logits of ±1000 with τ ≥ 0.5. τ = 1 is chapter 2's categorical.
+    """
+    scaled = logits / temperature
+    shifted = scaled - scaled.max(axis=1, keepdims=True)
+    log_probs = shifted - np.log(np.exp(shifted).sum(axis=1, keepdims=True))
+    probs = np.exp(log_probs)
+    rows = np.arange(len(actions))
+    actions = actions.astype(np.int64)
+    grad_scaled = -probs
+    grad_scaled[rows, actions] += 1.0
+    # log π depends on τ only through z / τ, whose derivative in τ is −z / τ²
+    grad_temperature = (grad_scaled * logits).sum(axis=1) * (-1.0 / temperature**2)
+    return log_probs[rows, actions], grad_scaled / temperature, grad_temperature

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 EXERCISES = ["pg_objective", "normalize_advantages"]
+TRANSFER = ["linear_softmax_policy_gradient"]  # the chapter's idea applied to a case the book has not shown
 
 
 def pg_objective(logp: np.ndarray, advantages: np.ndarray):
@@ -37,3 +38,20 @@ def normalize_advantages(advantages: np.ndarray) -> np.ndarray:
     if len(advantages) < 2:
         return np.array(advantages, dtype=np.float64)
     return (advantages - advantages.mean()) / (advantages.std() + 1e-8)
+
+
+def linear_softmax_policy_gradient(features: np.ndarray, theta: np.ndarray, actions: np.ndarray, advantages):
+    """Transfer task: L^PG's gradient carried all the way to the parameters of a linear softmax policy.
+
+    The policy: π_θ(·|s_t) = softmax(s_t θ), features s_t one row of ``features``.
+    features: (n, d).  theta: (d, k).  actions: (n,) integers in 0..k−1.  advantages: (n,) Â_t, constants.
+    Returns (value, grad): value = L^PG (eq. 2, the mean over the batch) as a float; grad = ∂L^PG/∂θ, (d, k).
+    """
+    logits = features @ theta
+    shifted = logits - logits.max(axis=1, keepdims=True)
+    log_probs = shifted - np.log(np.exp(shifted).sum(axis=1, keepdims=True))
+    rows, actions = np.arange(len(actions)), actions.astype(np.int64)
+    n = len(actions)
+    score = -np.exp(log_probs)
+    score[rows, actions] += 1.0
+    return float(np.mean(log_probs[rows, actions] * advantages)), features.T @ (score * advantages[:, None]) / n

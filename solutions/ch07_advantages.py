@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 EXERCISES = ["discounted_returns", "td_residuals", "gae"]
+TRANSFER = ["gae_with_step_discounts"]  # the chapter's idea applied to a case the book has not shown
 
 
 def discounted_returns(rewards, next_values, terminated, truncated, gamma: float) -> np.ndarray:
@@ -70,4 +71,26 @@ def gae(rewards, values, next_values, terminated, truncated, gamma: float, lam: 
             advantages[t] = deltas[t]
         else:
             advantages[t] = deltas[t] + gamma * lam * np.where(ends[t], 0.0, advantages[t + 1])
+    return advantages
+
+
+def gae_with_step_discounts(rewards, values, next_values, terminated, truncated, gammas, lam: float) -> np.ndarray:
+    """Transfer task: GAE when every step has its own discount, as when steps last different times (γ_t = γ^{Δt_t}).
+
+    gammas[t] discounts what follows step t: its bootstrap V(s_{t+1}) and everything after it. With every
+    gammas[t] = γ this is chapter 7's gae. The flags, the bootstrap at a truncation or at the batch's last step and
+    the episode ends are gae's.
+    rewards, values, next_values, gammas: (T,) floats.  terminated, truncated: (T,) bools.  lam: λ.
+    Returns Â, a new (T,) float64 array.
+    """
+    rewards, values = np.asarray(rewards, dtype=np.float64), np.asarray(values, dtype=np.float64)
+    terminated, truncated = np.asarray(terminated, dtype=bool), np.asarray(truncated, dtype=bool)
+    gammas = np.asarray(gammas, dtype=np.float64)
+    deltas = rewards + gammas * np.where(terminated, 0.0, next_values) - values
+    advantages = np.zeros_like(deltas)
+    carry = 0.0
+    for t in range(len(deltas) - 1, -1, -1):
+        ends = terminated[t] or truncated[t] or t == len(deltas) - 1
+        carry = deltas[t] + (0.0 if ends else gammas[t] * lam * carry)
+        advantages[t] = carry
     return advantages

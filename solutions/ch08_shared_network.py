@@ -16,6 +16,7 @@ import numpy as np
 from minippo.losses import clip_objective
 
 EXERCISES = ["value_loss", "clipped_value_loss", "clip_vf_s_objective"]
+TRANSFER = ["huber_value_loss"]  # the chapter's idea applied to a case the book has not shown
 
 
 def value_loss(values: np.ndarray, value_targets: np.ndarray):
@@ -71,3 +72,18 @@ def clip_vf_s_objective(
     vf_value, vf_grad = value_loss(values, value_targets)
     objective = clip_value - c1 * vf_value + c2 * float(np.mean(entropy))
     return objective, grad_logp, -c1 * vf_grad, np.full(n, c2 / n)
+
+
+def huber_value_loss(values: np.ndarray, value_targets: np.ndarray, delta: float):
+    """Transfer task: a value loss that grows linearly for large errors, and its gradient.
+
+    The Huber loss (Huber 1964) of each error e_t = V_t − V^targ_t with threshold δ > 0: ½ e² where |e| ≤ δ, and
+    beyond it the straight line that continues ½ e² with the same value and slope at |e| = δ. The loss is its mean
+    over the batch, a loss to *minimise*.
+    values: (n,) the variable.  value_targets: (n,) constants.  delta: δ > 0.
+    Returns (loss, grad): loss a float; grad = ∂loss/∂V_t, shape (n,).
+    """
+    error = values - value_targets
+    size = np.abs(error)
+    loss = np.where(size <= delta, 0.5 * error * error, delta * (size - 0.5 * delta))
+    return float(np.mean(loss)), np.clip(error, -delta, delta) / len(values)

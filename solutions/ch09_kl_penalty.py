@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 EXERCISES = ["categorical_kl", "categorical_kl_backward", "kl_penalty_objective", "adaptive_beta"]
+TRANSFER = ["reverse_kl_backward"]  # the chapter's idea applied to a case the book has not shown
 
 
 def log_softmax(logits: np.ndarray) -> np.ndarray:
@@ -65,3 +66,22 @@ def adaptive_beta(beta: float, kl: float, kl_target: float) -> float:
     if kl > kl_target * 1.5:
         return beta * 2.0
     return float(beta)
+
+
+def reverse_kl_backward(logits_old: np.ndarray, logits: np.ndarray, grad_kl: np.ndarray):
+    """Transfer task: the other KL, KL[π ‖ π_old] (the new policy first), and its gradient in the new logits.
+
+    logits_old, logits: (n, k).  grad_kl: (n,), ∂L/∂KL_n.
+    Returns (kl, grad_logits): kl (n,) = KL[π(·|s_n) ‖ π_old(·|s_n)] per row, ≥ 0, finite for logits of ±1000;
+    grad_logits (n, k) = ∂L/∂z for the new logits z (the old policy a constant).
+    """
+
+    def log_softmax(z):
+        shifted = z - z.max(axis=1, keepdims=True)
+        return shifted - np.log(np.exp(shifted).sum(axis=1, keepdims=True))
+
+    log_old, log_new = log_softmax(logits_old), log_softmax(logits)
+    probs = np.exp(log_new)
+    gap = log_new - log_old
+    kl = (probs * gap).sum(axis=1)
+    return kl, probs * (gap - kl[:, None]) * grad_kl[:, None]

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 EXERCISES = ["conv2d_forward", "conv2d_backward"]
+TRANSFER = ["max_pool2d_backward"]  # the chapter's idea applied to a case the book has not shown
 
 
 def conv2d_forward(x: np.ndarray, K: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -52,3 +53,22 @@ def conv2d_backward(x: np.ndarray, K: np.ndarray, grad_y: np.ndarray, need_grad_
             if need_grad_x:
                 grad_x[:, p : p + out_h, q : q + out_w, :] += grad_y @ K[p, q].T  # overlapping fields add up
     return grad_x, grad_K, grad_y.sum(axis=(0, 1, 2))
+
+
+def max_pool2d_backward(x: np.ndarray, size: int, grad_y: np.ndarray) -> np.ndarray:
+    """Transfer task: the backward pass of max pooling, a layer this chapter's network does not have.
+
+    Forward (given): each channel of each image is cut into non-overlapping size × size windows (H and W multiples of
+    size), and y[n, i, j, c] = max over the window's pixels x[n, size·i + p, size·j + q, c], 0 ≤ p, q < size.
+    x: (n, H, W, C).  size: the window's side.  grad_y: (n, H / size, W / size, C), ∂L/∂y.
+    Returns ∂L/∂x, (n, H, W, C), a new float64 array. Where a window's maximum is reached by several pixels, the
+    gradient goes to the first of them in row-major order (smallest p, then smallest q), as np.argmax picks it.
+    """
+    n, H, W, C = x.shape
+    h, w = H // size, W // size
+    windows = x.reshape(n, h, size, w, size, C).transpose(0, 1, 3, 5, 2, 4).reshape(n, h, w, C, size * size)
+    first = windows.argmax(axis=-1)
+    mask = np.zeros(windows.shape)
+    np.put_along_axis(mask, first[..., None], 1.0, axis=-1)
+    grad_windows = mask * grad_y[..., None]
+    return grad_windows.reshape(n, h, w, C, size, size).transpose(0, 1, 4, 2, 5, 3).reshape(n, H, W, C)

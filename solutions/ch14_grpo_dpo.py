@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 EXERCISES = ["group_advantages", "grpo_objective", "dpo_loss"]
+TRANSFER = ["ipo_loss"]  # the chapter's idea applied to a case the book has not shown
 
 
 def group_advantages(scores: np.ndarray, eps: float = 1e-8) -> np.ndarray:
@@ -57,3 +58,19 @@ def dpo_loss(logp_preferred, logp_rejected, ref_preferred, ref_rejected, beta: f
     loss = float(np.logaddexp(0.0, -margin).sum()) / n
     wrong = np.exp(-np.logaddexp(0.0, margin))  # σ(−Δ)
     return loss, -beta * wrong / n, beta * wrong / n
+
+
+def ipo_loss(logp_preferred, logp_rejected, ref_preferred, ref_rejected, tau: float):
+    """Transfer task: IPO's loss (Azar et al. 2023), DPO's pairs with a squared loss in place of −log σ, and its
+    gradient.
+
+    For each pair, h = (log π_θ(y_w|x) − log π_ref(y_w|x)) − (log π_θ(y_l|x) − log π_ref(y_l|x)); the loss is the mean
+    over the n pairs of (h − 1/(2τ))², which pulls every margin h to the same target 1/(2τ) instead of pushing it up
+    without end as DPO's does.
+    logp_preferred, logp_rejected, ref_preferred, ref_rejected: (n,) as for dpo_loss.  tau: τ > 0.
+    Returns (loss, grad_preferred, grad_rejected): the loss as a float, and ∂L/∂ log π_θ(y_w|x) and
+    ∂L/∂ log π_θ(y_l|x), both (n,).
+    """
+    n = len(logp_preferred)
+    gap = (logp_preferred - ref_preferred) - (logp_rejected - ref_rejected) - 1.0 / (2.0 * tau)
+    return float(np.mean(gap * gap)), 2.0 * gap / n, -2.0 * gap / n

@@ -229,3 +229,66 @@ def test_clip_fraction_counts_ratios_outside_the_band(student, batch):
             "clip_fraction",
             f"the fraction outside the band for ε = {epsilon} ({count} of {len(RATIOS)} ratios: {RATIOS.tolist()})",
         )
+
+
+# the transfer task: dual-clip PPO's lower bound for negative advantages
+
+DUAL = [  # (r, Â): the bound c = 3 binds for Â < 0 and r > 3 only
+    (0.5, 1.0), (1.1, 1.0), (1.5, 1.0), (4.0, 1.0),
+    (0.5, -1.0), (1.1, -1.0), (2.0, -1.0), (4.0, -1.0), (6.0, -2.0),
+]  # fmt: skip
+
+
+def dual_clip_term(r, a, epsilon=0.2, c=3.0):
+    term = min(r * a, clip(r, 1 - epsilon, 1 + epsilon) * a)
+    return max(term, c * a) if a < 0 else term
+
+
+@pytest.mark.parametrize("ratio, advantage", DUAL, ids=[f"r={r}-A={a}" for r, a in DUAL])
+def test_dual_clip_surrogate_one_sample(student, ratio, advantage):
+    logp_old = np.array([-1.1])
+    result = _harness.call_checking_inputs(
+        student.dual_clip_surrogate, "dual_clip_surrogate", np.log([ratio]) + logp_old, logp_old,
+        np.array([advantage]), 0.2, 3.0,
+    )  # fmt: skip
+    assert isinstance(result, tuple) and len(result) == 2, "dual_clip_surrogate should return (value, grad)"
+    value, grad = result
+    sample = f"one sample with r = {ratio}, Â = {advantage}, ε = 0.2, c = 3"
+    clip_term = min(ratio * advantage, clip(ratio, 0.8, 1.2) * advantage)
+    expected = dual_clip_term(ratio, advantage)
+    bound_everywhere = max(clip_term, 3.0 * advantage)
+    expect_number(
+        value, expected, "dual_clip_surrogate", f"the value for {sample}", alternatives={
+            "L^CLIP's term without the bound c Â (the bound binds for Â < 0 and r > c)": clip_term,
+            "the bound c Â applied to a positive advantage too": bound_everywhere,
+            "min(·, c Â) where the bound is a max, a floor for Â < 0": min(clip_term, 3.0 * advantage),
+        },
+    )  # fmt: skip
+    bound_binds = advantage < 0 and ratio > 3.0
+    helps = (advantage > 0 and ratio <= 1.2) or (advantage < 0 and ratio >= 0.8)
+    expected_grad = 0.0 if bound_binds or not helps else ratio * advantage
+    expect_number(
+        check_array(grad, "dual_clip_surrogate", (1,), f"the gradient for {sample}"), expected_grad,
+        "dual_clip_surrogate", f"the gradient for {sample}", alternatives={
+            "L^CLIP's gradient where the bound c Â binds (c Â is a constant there)": ratio * advantage
+            if bound_binds else None,
+        },
+    )  # fmt: skip
+
+
+def test_dual_clip_surrogate_matches_finite_differences(student, rng):
+    ratios = np.array([0.4, 0.7, 0.9, 1.1, 1.3, 2.0, 2.6, 3.4, 5.0, 0.5, 0.95, 1.5, 2.9, 3.3, 4.5, 8.0])
+    advantages = np.where(np.arange(len(ratios)) < 9, -1.0, 1.0) * rng.uniform(0.3, 2.0, len(ratios))
+    logp_old = rng.normal(-1.0, 0.5, len(ratios))
+    logp = np.log(ratios) + logp_old
+    value, grad = student.dual_clip_surrogate(logp, logp_old, advantages, 0.2, 3.0)
+    expected = np.mean([dual_clip_term(r, a) for r, a in zip(ratios, advantages)])
+    check_close(check_scalar(value, "dual_clip_surrogate"), expected, "dual_clip_surrogate", "the value (c = 3)")
+    check_array(grad, "dual_clip_surrogate", (len(ratios),), "the gradient")
+    numeric = numerical_gradient(
+        lambda: float(student.dual_clip_surrogate(logp, logp_old, advantages, 0.2, 3.0)[0]), logp, 1e-7
+    )
+    check_close(
+        grad, numeric, "dual_clip_surrogate", "∂/∂ log π (finite differences), ε = 0.2, c = 3",
+        where=lambda i: f"r_t = {ratios[i]}, Â_t = {advantages[i]:.4g}",
+    )  # fmt: skip

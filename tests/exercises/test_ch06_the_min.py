@@ -208,3 +208,75 @@ def test_clip_objective_value_and_gradient(student, batch, epsilon):
         f"∂L^CLIP/∂ log π (checked by finite differences of the value, ε = {epsilon})",
         where=lambda i: f"r_t = {ratios[i]}, Â_t = {advantages[i]:.4g}: {where_is_ratio(ratios[i], epsilon)}",
     )
+
+
+# the transfer task: L^CLIP differentiated to the logits of a categorical policy
+
+
+@pytest.fixture
+def logits_case(rng):
+    n = 12
+    logits = rng.normal(0.0, 1.0, (n, 3))
+    actions = rng.integers(0, 3, n)
+    log_probs = logits - np.log(np.exp(logits).sum(axis=1, keepdims=True))
+    # old log-probabilities that put the ratios on both sides of the band and inside it, away from its edges
+    ratios = np.array([0.5, 0.7, 0.9, 1.0, 1.1, 1.35, 1.6, 2.2, 0.6, 0.95, 1.05, 1.5])
+    logp_old = log_probs[np.arange(n), actions] - np.log(ratios)
+    advantages = np.where(np.arange(n) % 2 == 0, 1.0, -1.0) * rng.uniform(0.3, 2.0, n)
+    return logits, actions, logp_old, advantages
+
+
+def test_clip_objective_logits_gradient_of_one_sample(student):
+    # two actions with logits 0 and 0 (π = ½ each), a = 0, π_old(0) = ½ / 1.5: r = 1.5 > 1 + ε with Â = 1: switched off
+    logits, actions, advantages = np.zeros((1, 2)), np.array([0]), np.array([1.0])
+    logp_old = np.array([np.log(0.5 / 1.5)])
+    result = _harness.call_checking_inputs(
+        student.clip_objective_logits_gradient, "clip_objective_logits_gradient", logits, actions, logp_old,
+        advantages, 0.2,
+    )  # fmt: skip
+    assert isinstance(result, tuple) and len(result) == 2, "clip_objective_logits_gradient should return (value, grad)"
+    grad = check_array(result[1], "clip_objective_logits_gradient", (1, 2), "the gradient")
+    if np.allclose(grad, [[0.75, -0.75]]):
+        raise AssertionError(
+            "clip_objective_logits_gradient: for one sample with r = 1.5, Â = 1, ε = 0.2 (past the band in the helped "
+            "direction) the gradient should be 0, not [[0.75, −0.75]]: L^CPI's gradient carried to the logits, the min "
+            "not switching the sample off?"
+        )
+    check_close(grad, [[0.0, 0.0]], "clip_objective_logits_gradient", "the gradient for r = 1.5, Â = 1, ε = 0.2")
+    # r = 1 inside the band: ∂ log π(0)/∂z = (½, −½), times r Â = 1
+    value, grad = student.clip_objective_logits_gradient(logits, actions, np.log([0.5]), advantages, 0.2)
+    mistakes = {
+        "∂L^CLIP/∂ log π broadcast to every logit, without the softmax's −π term": [[1.0, 1.0]],
+        "only the chosen action's logit receives a gradient (the score's −π term forgotten)": [[1.0, 0.0]],
+    }
+    for words, wrong in mistakes.items():
+        if np.allclose(grad, wrong):
+            raise AssertionError(
+                f"clip_objective_logits_gradient: for one sample with π = (½, ½), a = 0, r = 1, Â = 1 the gradient "
+                f"should be [[0.5, −0.5]], not {np.asarray(grad).tolist()}: {words}?"
+            )
+    check_close(
+        check_array(grad, "clip_objective_logits_gradient", (1, 2), "the gradient"), [[0.5, -0.5]],
+        "clip_objective_logits_gradient", "the gradient for π = (½, ½), a = 0, r = 1, Â = 1",
+    )  # fmt: skip
+
+
+def test_clip_objective_logits_gradient_matches_finite_differences(student, logits_case):
+    logits, actions, logp_old, advantages = logits_case
+    value, grad = student.clip_objective_logits_gradient(logits, actions, logp_old, advantages, 0.2)
+    log_probs = logits - np.log(np.exp(logits).sum(axis=1, keepdims=True))
+    from minippo.losses import clip_objective
+
+    expected, _ = clip_objective(log_probs[np.arange(len(actions)), actions], logp_old, advantages, 0.2)
+    check_close(
+        check_scalar(value, "clip_objective_logits_gradient"),
+        expected,
+        "clip_objective_logits_gradient",
+        "the value L^CLIP",
+    )
+    check_array(grad, "clip_objective_logits_gradient", logits.shape, "the gradient")
+    z = logits.copy()
+    numeric = numerical_gradient(
+        lambda: float(student.clip_objective_logits_gradient(z, actions, logp_old, advantages, 0.2)[0]), z, 1e-7
+    )
+    check_close(grad, numeric, "clip_objective_logits_gradient", "∂L^CLIP/∂z (finite differences)", 1e-5, 1e-8)

@@ -200,3 +200,44 @@ def test_clip_vf_s_objective_value_and_gradients(student, objective_batch, c1, c
             "clip_vf_s_objective",
             f"{what} (checked by finite differences, c1 = {c1}, c2 = {c2}, ε = {epsilon})",
         )
+
+
+# the transfer task: the Huber value loss
+
+
+def test_huber_value_loss_of_single_errors(student):
+    # δ = 1: errors 0.5 (quadratic part), 3 and −3 (linear part)
+    for error, loss, slope in [(0.5, 0.125, 0.5), (3.0, 2.5, 1.0), (-3.0, 2.5, -1.0)]:
+        result = _harness.call_checking_inputs(
+            student.huber_value_loss, "huber_value_loss", np.array([error]), np.array([0.0]), 1.0
+        )
+        assert isinstance(result, tuple) and len(result) == 2, "huber_value_loss should return (loss, grad)"
+        expect_number(
+            result[0], loss, "huber_value_loss", f"the loss for one error e = {error} with δ = 1",
+            alternatives={"δ |e| without the −½δ² that joins the line to the parabola": abs(error),
+                          "½ e², the squared error everywhere": 0.5 * error * error},
+        )  # fmt: skip
+        expect_number(
+            check_array(result[1], "huber_value_loss", (1,), "the gradient")[0], slope, "huber_value_loss",
+            f"the gradient for one error e = {error} with δ = 1",
+            alternatives={"the squared error's gradient e, unclipped": error if abs(error) > 1 else None},
+        )  # fmt: skip
+
+
+def test_huber_value_loss_matches_finite_differences(student, rng):
+    values, targets = rng.normal(0.0, 3.0, 9), rng.normal(0.0, 1.0, 9)
+    loss, grad = student.huber_value_loss(values, targets, 1.5)
+    error = values - targets
+    expected = np.mean(np.where(np.abs(error) <= 1.5, 0.5 * error**2, 1.5 * (np.abs(error) - 0.75)))
+    check_close(check_scalar(loss, "huber_value_loss"), expected, "huber_value_loss", "the mean Huber loss, δ = 1.5")
+    v = values.copy()
+    numeric = numerical_gradient(lambda: float(student.huber_value_loss(v, targets, 1.5)[0]), v, 1e-6)
+    check_close(
+        check_array(grad, "huber_value_loss", (9,), "the gradient"),
+        numeric,
+        "huber_value_loss",
+        "∂loss/∂V (finite differences), δ = 1.5",
+        1e-5,
+        1e-8,
+        where={"e_t": error},
+    )

@@ -18,3 +18,20 @@ VARIANTS = {
     "clip_fraction_two_sides": {"clip_fraction": clip_fraction_two_sides},
     "clip_fraction_expm1": {"clip_fraction": clip_fraction_expm1},
 }
+
+
+def dual_clip_case_by_case(logp, logp_old, advantages, epsilon, dual_clip):
+    """Case by case on the sign of Â: (min(r, 1 + ε)) Â above 0; below it, Â times r held in [1 − ε, c] from both
+    sides with the gradient alive only where r is strictly between the two."""
+    ratio = np.exp(logp - logp_old)
+    n = len(logp)
+    positive = advantages >= 0
+    value_pos = np.minimum(ratio, 1 + epsilon) * advantages
+    grad_pos = np.where(ratio <= 1 + epsilon, ratio * advantages, 0.0)
+    held = np.minimum(np.maximum(ratio, 1 - epsilon), dual_clip)
+    value_neg = held * advantages
+    grad_neg = np.where((ratio >= 1 - epsilon) & (ratio <= dual_clip), ratio * advantages, 0.0)
+    return float(np.mean(np.where(positive, value_pos, value_neg))), np.where(positive, grad_pos, grad_neg) / n
+
+
+VARIANTS["dual_clip_case_by_case"] = {"dual_clip_surrogate": dual_clip_case_by_case}

@@ -140,6 +140,7 @@ VARIANTS.update(
     }
 )
 
+
 def clipped_surrogate_open_band(logp, logp_old, advantages, epsilon):
     """The gradient passed on the open band 1 − ε < r < 1 + ε only: a ratio exactly on an edge loses its gradient,
     where the contract's closed band keeps it."""
@@ -186,3 +187,61 @@ FIRST_FAILURE = {
     "clipped_surrogate_open_band": r"exactly on the edges.*open band",
     "clipped_with_the_min": r"r = 0\.5, .*should be 0\.8.*: the min's asymmetric .*chapter 6's L\^CLIP",
 }
+
+
+# the transfer task
+
+
+def _clip_parts(logp, logp_old, advantages, epsilon):
+    ratio = np.exp(logp - logp_old)
+    unclipped = ratio * advantages
+    clipped = np.clip(ratio, 1 - epsilon, 1 + epsilon) * advantages
+    return np.minimum(unclipped, clipped), np.where(unclipped <= clipped, unclipped, 0.0)
+
+
+def dual_clip_without_the_bound(logp, logp_old, advantages, epsilon, dual_clip):
+    """Plain L^CLIP: the lower bound c Â never applied."""
+    term, grad = _clip_parts(logp, logp_old, advantages, epsilon)
+    return float(np.mean(term)), grad / len(logp)
+
+
+def dual_clip_bound_on_every_sign(logp, logp_old, advantages, epsilon, dual_clip):
+    """max(L^CLIP's term, c Â) for every sample, positive advantages included."""
+    term, grad = _clip_parts(logp, logp_old, advantages, epsilon)
+    floor = dual_clip * advantages
+    bounded = term < floor
+    return float(np.mean(np.where(bounded, floor, term))), np.where(bounded, 0.0, grad) / len(logp)
+
+
+def dual_clip_gradient_not_zeroed(logp, logp_old, advantages, epsilon, dual_clip):
+    """The value bounded, but the gradient left as L^CLIP's where the bound binds."""
+    term, grad = _clip_parts(logp, logp_old, advantages, epsilon)
+    floor = dual_clip * advantages
+    bounded = (advantages < 0) & (term < floor)
+    return float(np.mean(np.where(bounded, floor, term))), grad / len(logp)
+
+
+def dual_clip_min_for_max(logp, logp_old, advantages, epsilon, dual_clip):
+    """min(term, c Â) for Â < 0: the bound taken as a ceiling instead of a floor."""
+    term, grad = _clip_parts(logp, logp_old, advantages, epsilon)
+    floor = dual_clip * advantages
+    bounded = (advantages < 0) & (floor < term)
+    return float(np.mean(np.where(bounded, floor, term))), np.where(bounded, 0.0, grad) / len(logp)
+
+
+VARIANTS.update(
+    {
+        "dual_clip_without_the_bound": {"dual_clip_surrogate": dual_clip_without_the_bound},
+        "dual_clip_bound_on_every_sign": {"dual_clip_surrogate": dual_clip_bound_on_every_sign},
+        "dual_clip_gradient_not_zeroed": {"dual_clip_surrogate": dual_clip_gradient_not_zeroed},
+        "dual_clip_min_for_max": {"dual_clip_surrogate": dual_clip_min_for_max},
+    }
+)
+FIRST_FAILURE.update(
+    {
+        "dual_clip_without_the_bound": r"r = 4\.0, Â = -1\.0.*without the bound",
+        "dual_clip_bound_on_every_sign": r"r = 0\.5, Â = 1\.0.*positive advantage too",
+        "dual_clip_gradient_not_zeroed": r"gradient for one sample with r = 4\.0, Â = -1\.0.*L\^CLIP's gradient where",
+        "dual_clip_min_for_max": r"r = 0\.5, Â = -1\.0.*a floor for Â < 0",
+    }
+)
