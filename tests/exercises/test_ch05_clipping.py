@@ -60,6 +60,18 @@ def clip(r, low, high):
     return low if r < low else high if r > high else r
 
 
+def gives_the_answer_of_epsilon_02(student, epsilon) -> bool:
+    """Whether clipped_surrogate, called with ``epsilon`` on ratios across the band, returns the values that ε = 0.2
+    gives (and that ``epsilon`` does not): ε written into the code."""
+    ratios, advantages = np.array([0.5, 0.75, 0.85, 1.15, 1.25, 1.5]), np.ones(6)
+    try:
+        value, _ = student.clipped_surrogate(np.log(ratios), np.zeros(6), advantages, epsilon)
+    except Exception:  # noqa: BLE001 - a probe only: the test's own call reports what raised
+        return False
+    at_02 = np.mean(np.clip(ratios, 0.8, 1.2))
+    return abs(float(value) - at_02) < 1e-9 and abs(at_02 - np.mean(np.clip(ratios, 1 - epsilon, 1 + epsilon))) > 1e-6
+
+
 @pytest.mark.parametrize("ratio, advantage, epsilon", SINGLE, ids=[f"r={r}-A={a}-eps={e}" for r, a, e in SINGLE])
 def test_clipped_surrogate_one_sample(student, ratio, advantage, epsilon):
     logp_old = np.array([-1.3])
@@ -72,13 +84,16 @@ def test_clipped_surrogate_one_sample(student, ratio, advantage, epsilon):
     fixed = "ε fixed at 0.2 (the epsilon argument ignored)"
     the_min = "the min's asymmetric value and gradient: that is chapter 6's L^CLIP, not the clipped term alone"
     helps = (advantage > 0 and ratio <= 1 + epsilon) or (advantage < 0 and ratio >= 1 - epsilon)
-    # the likeliest mistake first (the order the grader's own wrong variants make them); ε fixed last: it only shows
-    # for ε ≠ 0.2, and its numbers coincide with other mistakes'
+    log_band = abs(np.log(ratio)) < epsilon
+    # ε fixed is named only where the student's code, probed on other ratios, gives ε = 0.2's answer for this ε; the
+    # other mistakes in the order the grader's own wrong variants reach this case: a case that tells two of them apart
+    # comes earlier in SINGLE, so the one still standing here is named first
+    ignores_epsilon = epsilon != 0.2 and gives_the_answer_of_epsilon_02(student, epsilon)
     value_mistakes = {
+        fixed: clip(ratio, 0.8, 1.2) * advantage if ignores_epsilon else None,
         the_min: min(ratio * advantage, clip(ratio, 1 - epsilon, 1 + epsilon) * advantage),
         "r Â, the ratio unclipped": ratio * advantage,
         swapped: clip(inverse, 1 - epsilon, 1 + epsilon) * advantage,
-        fixed: clip(ratio, 0.8, 1.2) * advantage if epsilon != 0.2 else None,
     }
     expected_value = clip(ratio, 1 - epsilon, 1 + epsilon) * advantage
     why = f"clip(r, 1 − ε, 1 + ε) Â, r is {place}"
@@ -87,10 +102,11 @@ def test_clipped_surrogate_one_sample(student, ratio, advantage, epsilon):
     )
     check_array(grad, "clipped_surrogate", (1,), f"the gradient for {sample}")
     grad_mistakes = {
+        fixed: (ratio * advantage if abs(ratio - 1) < 0.2 else 0.0) if ignores_epsilon else None,
+        "the gradient's band tested on |log r| < ε instead of |r − 1| ≤ ε": ratio * advantage if log_band else 0.0,
         the_min: ratio * advantage if helps else 0.0,
         "the gradient of the unclipped r Â, as if the clip were not there": None if inside else ratio * advantage,
         swapped: inverse * advantage if abs(inverse - 1) < epsilon else 0.0,
-        fixed: (ratio * advantage if abs(ratio - 1) < 0.2 else 0.0) if epsilon != 0.2 else None,
     }
     why = f"r Â, since r is {place}" if inside else f"clip(r) is a constant there: r is {place}"
     expected_grad = ratio * advantage if inside else 0.0
@@ -103,9 +119,9 @@ def test_clipped_surrogate_one_sample(student, ratio, advantage, epsilon):
 def test_clip_fraction_of_one_sample(student, ratio, epsilon):
     fraction = check_scalar(student.clip_fraction(np.log([ratio]), np.zeros(1), epsilon), "clip_fraction")
     expected = float(abs(ratio - 1) > epsilon)
-    mistakes = {
-        "r computed as π_old/π (log π and log π_old swapped)": float(abs(1 / ratio - 1) > epsilon),
+    mistakes = {  # the window cases that tell these two apart come first; r = 0.83 is there for the swap alone
         "a band on |log r|": float(abs(np.log(ratio)) > epsilon),
+        "r computed as π_old/π (log π and log π_old swapped)": float(abs(1 / ratio - 1) > epsilon),
     }
     named = [words for words, value in mistakes.items() if value == fraction]
     assert fraction == expected, (

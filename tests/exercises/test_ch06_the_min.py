@@ -32,8 +32,8 @@ SINGLE = [
     (1.1, 2.0, 0.2, "inside"),
     (0.9, -1.0, 0.2, "inside"),
     (1.5, 1.0, 0.2, "above the band with Â > 0: the clip holds it, nothing more to gain"),
-    (1.5, -1.0, 0.2, "above the band with Â < 0: the move hurts, so the unclipped term is the min"),
     (0.5, -1.0, 0.2, "below the band with Â < 0: the clip holds it, nothing more to gain"),
+    (1.5, -1.0, 0.2, "above the band with Â < 0: the move hurts, so the unclipped term is the min"),
     (0.5, 1.0, 0.2, "below the band with Â > 0: the move hurts, so the unclipped term is the min"),
     (1.15, 1.0, 0.1, "above the band with Â > 0"),
     (0.75, -1.0, 0.2, "below the band with Â < 0"),
@@ -52,6 +52,19 @@ def per_sample_min(ratio, advantage, epsilon):
     return min(ratio * advantage, clipped * advantage)
 
 
+def gives_the_answer_of_epsilon_02(student, epsilon) -> bool:
+    """Whether clip_objective, called with ``epsilon`` on ratios across the band and both signs of Â, returns the value
+    that ε = 0.2 gives (and that ``epsilon`` does not): ε written into the code."""
+    ratios = np.array([0.5, 0.75, 0.85, 1.15, 1.25, 1.5] * 2)
+    advantages = np.repeat([1.0, -1.0], 6)
+    try:
+        value, _ = student.clip_objective(np.log(ratios), np.zeros(12), advantages, epsilon)
+    except Exception:  # noqa: BLE001 - a probe only: the test's own call reports what raised
+        return False
+    at = {e: np.mean([per_sample_min(r, a, e) for r, a in zip(ratios, advantages)]) for e in (0.2, epsilon)}
+    return abs(float(value) - at[0.2]) < 1e-9 and abs(at[0.2] - at[epsilon]) > 1e-6
+
+
 @pytest.mark.parametrize(
     "ratio, advantage, epsilon, case", SINGLE, ids=[f"r={r}-A={a}-eps={e}" for r, a, e, _ in SINGLE]
 )
@@ -68,33 +81,36 @@ def test_clip_objective_one_sample(student, ratio, advantage, epsilon, case):
     swapped = "r computed as π_old/π (log π and log π_old swapped)"
     inverse_flat = (inverse > 1 + epsilon and advantage > 0) or (inverse < 1 - epsilon and advantage < 0)
     fixed_flat = (ratio > 1.2 and advantage > 0) or (ratio < 0.8 and advantage < 0)
+    # ε fixed is named only where the code, probed on other ratios, gives ε = 0.2's answer for this ε; the others in
+    # the order the grader's wrong variants reach this case (a case that tells two apart comes earlier in SINGLE)
+    ignores_epsilon = epsilon != 0.2 and gives_the_answer_of_epsilon_02(student, epsilon)
     grad_mistakes = {
         "ε fixed at 0.2 (the epsilon argument ignored)": (0.0 if fixed_flat else ratio * advantage)
-        if epsilon != 0.2
+        if ignores_epsilon
         else None,
-        swapped: 0.0 if inverse_flat else inverse * advantage,
         "the gradient of the clipped term alone (no min): it vanishes outside the band also where the move hurts": (
             ratio * advantage if abs(ratio - 1) < epsilon else 0.0
         ),
+        swapped: 0.0 if inverse_flat else inverse * advantage,
     }
     value_mistakes = {
         "ε fixed at 0.2 (the epsilon argument ignored)": per_sample_min(ratio, advantage, 0.2)
-        if epsilon != 0.2
+        if ignores_epsilon
         else None,
-        swapped: per_sample_min(inverse, advantage, epsilon),
-        "max(r Â, clip(r) Â), the optimistic bound; L^CLIP takes the min": max(ratio, clipped) * advantage
-        if advantage > 0
-        else min(ratio, clipped) * advantage,
-        "the clipped term alone (no min with r Â)": clipped * advantage,
-        "min(r, clip(r)) Â: the min taken over the ratios, before multiplying by Â": min(ratio, clipped) * advantage,
         "the log-ratio clipped to ±ε, a band (e^−ε, e^ε): clip r itself to (1 − ε, 1 + ε)": min(
             ratio * advantage, min(max(ratio, np.exp(-epsilon)), np.exp(epsilon)) * advantage
         ),
+        "the clipped term alone (no min with r Â)": clipped * advantage,
+        "min(r, clip(r)) Â: the min taken over the ratios, before multiplying by Â": min(ratio, clipped) * advantage,
+        "max(r Â, clip(r) Â), the optimistic bound; L^CLIP takes the min": max(ratio, clipped) * advantage
+        if advantage > 0
+        else min(ratio, clipped) * advantage,
         "np.clip(r Â, (1 − ε) Â, (1 + ε) Â): with Â < 0 those bounds are upside down; clip r, then multiply by Â": min(
             ratio * advantage, min(max(ratio * advantage, (1 - epsilon) * advantage), (1 + epsilon) * advantage)
         )
         if advantage < 0
         else None,
+        swapped: per_sample_min(inverse, advantage, epsilon),
     }
     expect_number(value, per_sample_min(ratio, advantage, epsilon), "clip_objective", f"the value for {sample}", place,
                   alternatives=value_mistakes)  # fmt: skip

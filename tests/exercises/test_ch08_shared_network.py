@@ -41,14 +41,17 @@ def test_clipped_value_loss_one_sample(student, v, v_old, target, epsilon, case)
     error, clipped_error = v - target, clipped - target
     sample = f"one sample with V = {v}, V_old = {v_old}, V^targ = {target}, ε = {epsilon}"
     expected_loss = 0.5 * max(error**2, clipped_error**2)
-    loss_mistakes = {
+    loss_mistakes = {  # the mistakes computed exactly first; the min, which the plain loss also gives here, after
+        "V clipped around V^targ instead of around V_old (V^clip = V_old + clip(V − V_old, −ε, ε))": 0.5
+        * max(error**2, min(max(error, -epsilon), epsilon) ** 2),
+        "V itself clipped to [−ε, ε] instead of its change V − V_old": 0.5
+        * max(error**2, (min(max(v, -epsilon), epsilon) - target) ** 2),
         "the smaller of the two errors (min): the clipped loss is pessimistic, it takes the max": 0.5
         * min(error**2, clipped_error**2),
         "ε fixed at 0.2 (the epsilon argument ignored)": None
         if epsilon == 0.2
         else 0.5 * max(error**2, (v_old + min(max(v - v_old, -0.2), 0.2) - target) ** 2),
-        "the plain loss ½ (V − V^targ)², as if nothing were clipped: is V clipped around V^targ instead of around "
-        "V_old (V^clip = V_old + clip(V − V_old, −ε, ε))": 0.5 * error**2,
+        "the plain loss ½ (V − V^targ)², as if nothing were clipped": 0.5 * error**2,
     }
     expect_number(loss, expected_loss, "clipped_value_loss", f"the loss for {sample}", case, alternatives=loss_mistakes)
     check_array(grad, "clipped_value_loss", (1,), f"the gradient for {sample}")
