@@ -93,7 +93,7 @@ def clipped_float32(logp, logp_old, advantages, epsilon):
 def clipped_summed(logp, logp_old, advantages, epsilon):
     """The sum over the batch instead of the mean (value and gradient)."""
     ratio = np.exp(logp - logp_old)
-    inside = (ratio > 1 - epsilon) & (ratio < 1 + epsilon)
+    inside = (ratio >= 1 - epsilon) & (ratio <= 1 + epsilon)
     return float(np.sum(np.clip(ratio, 1 - epsilon, 1 + epsilon) * advantages)), np.where(
         inside, ratio * advantages, 0.0
     )
@@ -184,7 +184,7 @@ FIRST_FAILURE = {
     "clip_fraction_epsilon_fixed": r"r = 1\.15 and ε = 0\.1",
     "clip_fraction_of_the_inverse_ratio": r"r = 0\.83 .*should be 0, not 1.*π_old/π",
     "clip_fraction_at_least_epsilon": r"exactly on the edges.*≥ ε",
-    "clipped_surrogate_open_band": r"exactly on the edges.*open band",
+    "clipped_surrogate_open_band": r"exactly on the edges of the band.*open band",
     "clipped_with_the_min": r"r = 0\.5, .*should be 0\.8.*: the min's asymmetric .*chapter 6's L\^CLIP",
 }
 
