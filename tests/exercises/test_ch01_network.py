@@ -252,6 +252,15 @@ def test_layer_norm_backward_matches_finite_differences(student, layer_norm_case
     inv_std = 1.0 / np.sqrt((centred * centred).mean(axis=1, keepdims=True) + 1e-5)
     g = grad_y * gain
     variance_constant = inv_std * (g - g.mean(axis=1, keepdims=True))
+    x_hat = centred * inv_std
+    without_gain = inv_std * (
+        grad_y - grad_y.mean(axis=1, keepdims=True) - x_hat * (grad_y * x_hat).mean(axis=1, keepdims=True)
+    )
+    if np.allclose(grad_x, without_gain, rtol=1e-6, atol=1e-9):
+        raise AssertionError(
+            "layer_norm_backward: ∂L/∂x is what it would be with every gain 1: ∂L/∂y carried back without the gain's "
+            "factor (y = gain · x̂)?"
+        )
     if np.allclose(grad_x, variance_constant, rtol=1e-6, atol=1e-9) and not np.allclose(grad_x, expected, 1e-5, 1e-7):
         raise AssertionError(
             "layer_norm_backward: ∂L/∂x is (g − mean g)/σ row by row, with g = ∂L/∂y · gain: the variance treated as a "

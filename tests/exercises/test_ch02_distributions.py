@@ -327,6 +327,11 @@ def test_tempered_categorical_matches_finite_differences(student, tempered_case,
     where = {"τ": temperature}
     if np.allclose(grad_temperature, -numeric_tau, rtol=1e-5, atol=1e-7):
         raise AssertionError(f"{name}: ∂ log π/∂τ has the opposite sign everywhere (τ divides the logits)")
+    if np.allclose(grad_temperature, -logits[np.arange(6), actions] / temperature**2, rtol=1e-6, atol=1e-9):
+        raise AssertionError(
+            f"{name}: ∂ log π/∂τ at τ = {temperature} is −z_a/τ², the derivative of the chosen logit's term alone: the "
+            "normaliser log Σ exp(z/τ) depends on τ too?"
+        )
     _harness.check_close(
         grad_temperature, numeric_tau, name, f"∂ log π/∂τ at τ = {temperature} (checked by finite differences)",
         1e-5, 1e-7, where=where,

@@ -115,6 +115,9 @@ def test_linear_softmax_policy_gradient_with_one_sample(student):
     mistakes = {
         "the score without its −π term, as if log π(a|s) were s θ[:, a]": np.array([[1.0, 0.0], [2.0, 0.0]]),
         "the gradient of π instead of log π": expected * 0.5,
+        "the outer product taken as (score Â)ᵀ x, the transpose of the (d, k) gradient": np.array(
+            [[0.5, 1.0], [-0.5, -1.0]]
+        ),
     }
     for words, value in mistakes.items():
         if np.allclose(grad, value):
@@ -141,4 +144,6 @@ def test_linear_softmax_policy_gradient_matches_finite_differences(student, line
     numeric = _harness.numerical_gradient(
         lambda: float(student.linear_softmax_policy_gradient(features, t, actions, advantages)[0]), t, 1e-6
     )
-    _harness.check_close(grad, numeric, "linear_softmax_policy_gradient", "∂L^PG/∂θ (finite differences)", 1e-5, 1e-7)
+    _harness.check_close(
+        grad, numeric, "linear_softmax_policy_gradient", "∂L^PG/∂θ (finite differences)", 1e-5, 1e-7, n=len(actions)
+    )

@@ -109,12 +109,13 @@ def test_weighted_cpi_gradient_sums_to_zero(student, weighted_case):
     _, grad = student.weighted_cpi_objective(logp, logp_old, advantages)
     grad = _harness.check_array(grad, "weighted_cpi_objective", (6,), "the gradient")
     ratio = np.exp(logp - logp_old)
-    denominator_constant = ratio * advantages / ratio.sum()
-    named = (
-        ": the denominator Σ r treated as a constant, though every r_t is in it?"
-        if np.allclose(grad, denominator_constant)
-        else ""
-    )
+    value = float(np.sum(ratio * advantages) / ratio.sum())
+    mistakes = {
+        "the denominator Σ r treated as a constant, though every r_t is in it": ratio * advantages / ratio.sum(),
+        "L^CPI's gradient r Â / n, the weights' normalisation forgotten": ratio * advantages / len(ratio),
+        "the quotient rule's second term added instead of subtracted": ratio / ratio.sum() * (advantages + value),
+    }
+    named = "".join(f": {words}?" for words, wrong in mistakes.items() if np.allclose(grad, wrong))
     assert abs(grad.sum()) < 1e-9, (
         f"weighted_cpi_objective: the gradient should sum to 0 over the batch (adding one constant to every log π "
         f"multiplies every r_t alike and leaves Σ r Â / Σ r unchanged), not to {grad.sum():.6g}{named}"

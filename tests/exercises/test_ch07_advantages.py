@@ -440,6 +440,16 @@ def test_gae_with_step_discounts_of_two_steps(student):
             "λ = 1, Â_0 should be 1.45 = δ_0 + γ_0 λ Â_1, not 1.81: the carry discounted by γ_{t+1}, the next step's "
             "own discount, where γ_t discounts what follows step t?"
         )
+    mistakes = {
+        "one γ for the whole batch (the mean of the gammas), where each step has its own": [1.49, 0.7],
+        "δ_t bootstrapped without its γ_t: γ_t discounts V(s_{t+1}) in δ_t too": [1.5, 1.0],
+    }
+    for words, wrong in mistakes.items():
+        if np.allclose(result, wrong):
+            raise AssertionError(
+                f"gae_with_step_discounts: for two steps with r = (1, 0), V = 0, next_values = (0, 1), γ = (0.5, 0.9), "
+                f"λ = 1, Â should be {expected}, not {result.tolist()}: {words}?"
+            )
     check_close(result, expected, "gae_with_step_discounts", "Â for r = (1, 0), next_values = (0, 1), γ = (0.5, 0.9)")
 
 
@@ -449,6 +459,15 @@ def test_gae_with_equal_step_discounts_is_gae(student, step_discount_case):
     from minippo.advantages import gae
 
     expected = gae(rewards, values, next_values, terminated, truncated, 0.9, 0.8)
+    deltas = rewards + 0.9 * np.where(terminated, 0.0, next_values) - values
+    across = np.zeros(12)
+    for t in range(11, -1, -1):
+        across[t] = deltas[t] + (0.9 * 0.8 * across[t + 1] if t < 11 else 0.0)
+    if np.allclose(result, across):
+        raise AssertionError(
+            "gae_with_step_discounts: with every γ_t = 0.9, Â differs from chapter 7's gae before the episode ends at "
+            "steps 4 (terminated) and 8 (truncated): the carry not stopped at an episode's end?"
+        )
     check_close(
         check_array(result, "gae_with_step_discounts", (12,), "Â"),
         expected,

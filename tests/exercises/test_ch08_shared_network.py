@@ -235,6 +235,12 @@ def test_huber_value_loss_matches_finite_differences(student, rng):
     check_close(check_scalar(loss, "huber_value_loss"), expected, "huber_value_loss", "the mean Huber loss, δ = 1.5")
     v = values.copy()
     numeric = numerical_gradient(lambda: float(student.huber_value_loss(v, targets, 1.5)[0]), v, 1e-6)
+    sign_only = np.where(np.abs(error) <= 1.5, error, np.sign(error)) / 9
+    if np.allclose(grad, sign_only) and not np.allclose(sign_only, numeric):
+        raise AssertionError(
+            "huber_value_loss: beyond δ = 1.5 the gradient is sign(e) / n, without the line's slope δ: the linear "
+            "part is δ (|e| − ½ δ), whose derivative is δ sign(e)?"
+        )
     check_close(
         check_array(grad, "huber_value_loss", (9,), "the gradient"),
         numeric,

@@ -358,6 +358,7 @@ def test_max_pool2d_backward_at_a_tie(student):
         f"max_pool2d_backward: for the window [[4, 1], [4, 4]], whose maximum 4 is reached three times, the gradient 3 "
         f"should go to the first in row-major order only, [[3, 0], [0, 0]], not {got.tolist()}"
         + (": to every pixel that ties for the maximum?" if np.allclose(got, [[3.0, 0.0], [3.0, 3.0]]) else "")
+        + (": to the last of them, not the first?" if np.allclose(got, [[0.0, 0.0], [0.0, 3.0]]) else "")
     )
 
 
