@@ -63,13 +63,14 @@ def clip(r, low, high):
 def gives_the_answer_of_epsilon_02(student, epsilon) -> bool:
     """Whether clipped_surrogate, called with ``epsilon`` on ratios across the band, returns the values that ε = 0.2
     gives (and that ``epsilon`` does not): ε written into the code."""
-    ratios, advantages = np.array([0.5, 0.75, 0.85, 1.15, 1.25, 1.5]), np.ones(6)
+    ratios, advantages = np.array([0.5, 0.75, 0.85, 1.15, 1.25, 1.5]), np.arange(1.0, 7.0)  # no symmetry to cancel
     try:
         value, _ = student.clipped_surrogate(np.log(ratios), np.zeros(6), advantages, epsilon)
     except Exception:  # noqa: BLE001 - a probe only: the test's own call reports what raised
         return False
-    at_02 = np.mean(np.clip(ratios, 0.8, 1.2))
-    return abs(float(value) - at_02) < 1e-9 and abs(at_02 - np.mean(np.clip(ratios, 1 - epsilon, 1 + epsilon))) > 1e-6
+    at_02 = np.mean(np.clip(ratios, 0.8, 1.2) * advantages)
+    at_epsilon = np.mean(np.clip(ratios, 1 - epsilon, 1 + epsilon) * advantages)
+    return abs(float(value) - at_02) < 1e-9 and abs(at_02 - at_epsilon) > 1e-6
 
 
 @pytest.mark.parametrize("ratio, advantage, epsilon", SINGLE, ids=[f"r={r}-A={a}-eps={e}" for r, a, e in SINGLE])

@@ -56,7 +56,7 @@ def gives_the_answer_of_epsilon_02(student, epsilon) -> bool:
     """Whether clip_objective, called with ``epsilon`` on ratios across the band and both signs of Â, returns the value
     that ε = 0.2 gives (and that ``epsilon`` does not): ε written into the code."""
     ratios = np.array([0.5, 0.75, 0.85, 1.15, 1.25, 1.5] * 2)
-    advantages = np.repeat([1.0, -1.0], 6)
+    advantages = np.repeat([1.0, -1.0], 6) * np.arange(1.0, 13.0)  # no symmetry to cancel
     try:
         value, _ = student.clip_objective(np.log(ratios), np.zeros(12), advantages, epsilon)
     except Exception:  # noqa: BLE001 - a probe only: the test's own call reports what raised

@@ -19,6 +19,8 @@ VALUE_CASES = [
     (0.5, 0.0, 1.0, 0.2, "V moved 0.5 > ε toward the target: the clipped error is larger, and V^clip is flat there"),
     (0.1, 0.0, 1.0, 0.2, "V moved 0.1 < ε: V^clip = V, the two errors are equal"),
     (2.0, 1.0, 0.0, 0.4, "V moved 1 > ε away from the target: the unclipped error is larger"),
+    # V outside [−ε, ε] with the target elsewhere than 0: clipping V itself and clipping V − V^targ part ways here
+    (0.3, 1.0, 0.9, 0.1, "V moved 0.7 > ε, past the target: the unclipped error is larger"),
     (0.3, 1.0, 0.0, 0.4, "V moved 0.7 > ε toward the target: the clipped error is larger, and V^clip is flat there"),
 ]
 

@@ -230,6 +230,6 @@ FIRST_FAILURE.update(
         "ln_statistics_constant": r"mean treated as a constant",
         "ln_variance_constant": r"variance treated as a constant",
         "ln_gain_gradient_mean": r"n = 5 times too small everywhere: a mean where the sum belongs",
-        "ln_gain_forgotten_in_grad_x": r"∂L/∂x \(checked by finite differences\) is wrong",
+        "ln_gain_forgotten_in_grad_x": r"without the gain's factor",
     }
 )

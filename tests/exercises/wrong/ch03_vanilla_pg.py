@@ -167,8 +167,8 @@ VARIANTS.update(
 FIRST_FAILURE.update(
     {
         "linear_pg_onehot_only": r"without its −π term",
-        "linear_pg_summed": r"n times too large|finite differences",
+        "linear_pg_summed": r"7 = n times too large everywhere",
         "linear_pg_of_the_probability": r"gradient of π instead of log π",
-        "linear_pg_transposed_product": r"the gradient for s = \(1, 2\)",
+        "linear_pg_transposed_product": r"the outer product taken as \(score Â\)ᵀ x",
     }
 )

@@ -112,8 +112,8 @@ VARIANTS.update(
 FIRST_FAILURE.update(
     {
         "weighted_denominator_constant": r"denominator Σ r treated as a constant",
-        "weighted_cpi_gradient": r"should sum to 0",
-        "weighted_quotient_sign": r"should sum to 0",
+        "weighted_cpi_gradient": r"should sum to 0.*L\^CPI's gradient",
+        "weighted_quotient_sign": r"should sum to 0.*second term added",
         "weighted_mean_of_ratios": r"the value should be",
     }
 )

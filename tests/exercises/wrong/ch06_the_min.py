@@ -127,12 +127,12 @@ VARIANTS.update(
 )
 
 FIRST_FAILURE = {
-    "without_the_min": r"r = 1\.5, Â = -1\.0.*the clipped term alone",
+    "without_the_min": r"r = 1\.5, Â = -1\.0.*, not -1\.2: the clipped term alone",
     "max_instead_of_min": r"the optimistic bound; L\^CLIP takes the min",
-    "min_of_the_ratios": r"the min taken over the ratios",
-    "gradient_zero_outside_the_band": r"r = 1\.5, Â = -1\.0.*should be -1\.5",
+    "min_of_the_ratios": r", not -0\.5: min\(r, clip\(r\)\) Â: the min taken over the ratios",
+    "gradient_zero_outside_the_band": r"r = 1\.5, Â = -1\.0.*, not 0: the gradient of the clipped term alone",
     "gradient_never_zero": r"r = 1\.5, Â = 1\.0.*should be 0",
-    "case_by_case_on_log_ratio": r"r = 1\.21.*not on log r",
+    "case_by_case_on_log_ratio": r"r = 1\.21.*not on log r.*, not 1\.21: the log-ratio clipped to ±ε",
     "gradient_mask_strict": r"r = 1\.1, Â = 2\.0.*should be 2\.2.*inside the band.*, not 0",
     "epsilon_fixed": r"ε = 0\.1.*ε fixed at 0\.2",
     "gradient_of_the_min_value": r"r = 1\.5, Â = 1\.0.*should be 0",

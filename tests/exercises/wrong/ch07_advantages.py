@@ -334,8 +334,8 @@ VARIANTS.update(
 FIRST_FAILURE.update(
     {
         "step_gae_next_discount": r"carry discounted by γ_\{t\+1\}",
-        "step_gae_mean_discount": r"γ = \(0\.5, 0\.9\)",
-        "step_gae_across_episodes": r"chapter 7's gae.*(terminated|truncated)",
-        "step_gae_discount_only_in_the_carry": r"γ = \(0\.5, 0\.9\)",
+        "step_gae_mean_discount": r"one γ for the whole batch",
+        "step_gae_across_episodes": r"carry not stopped at an episode's end",
+        "step_gae_discount_only_in_the_carry": r"bootstrapped without its γ_t",
     }
 )

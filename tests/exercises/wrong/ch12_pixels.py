@@ -250,6 +250,6 @@ FIRST_FAILURE.update(
         "pool_backward_average": r"spread evenly",
         "pool_backward_every_tie": r"every pixel that ties",
         "pool_backward_transposed": r"p and q swapped",
-        "pool_backward_last_tie": r"first in row-major order only",
+        "pool_backward_last_tie": r"to the last of them",
     }
 )

@@ -186,7 +186,7 @@ FIRST_FAILURE.update(
     {
         "pl_all_pairs": r"every pair, not one choice after another",
         "pl_full_softmax": r"ones already chosen included",
-        "pl_naive_exp": r"±1000",
+        "pl_naive_exp": r"scores of ±1000",
         "pl_summed": r"K = 2 .*(8 times|n times)",
     }
 )

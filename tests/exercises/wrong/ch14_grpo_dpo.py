@@ -247,6 +247,6 @@ FIRST_FAILURE.update(
         "ipo_without_factor_two": r"without its factor 2",
         "ipo_same_sign": r"with the same sign",
         "ipo_target_one_over_tau": r"target 1/τ",
-        "ipo_summed": r"the loss, τ = 0\.1",
+        "ipo_summed": r"the loss, τ = 0\.1.*a sum over the batch",
     }
 )
