@@ -4,9 +4,8 @@ backward, by hand.
 
 Images are NHWC arrays, (n, H, W, C), channels last, as MinAtar gives them; a kernel K is (kh, kw, C, F), F the
 number of filters (output channels); a bias b is (F,). The convolution is deep learning's: a cross-correlation, the
-kernel not flipped, with stride 1 and no padding ("valid"), so the output is (n, H − kh + 1, W − kw + 1, F):
-
-    y[n, i, j, f] = b[f] + Σ_{p < kh} Σ_{q < kw} Σ_{c < C} x[n, i + p, j + q, c] K[p, q, c, f].
+kernel not flipped, with stride 1 and no padding ("valid"), so the output is (n, H − kh + 1, W − kw + 1, F): the book's
+(12.1), with a bias per filter.
 
 Grade: ``minippo grade 12``
 """
