@@ -27,49 +27,48 @@ EXERCISES = [
     "gaussian_entropy",
     "gaussian_entropy_backward",
 ]
+TRANSFER = ["tempered_categorical_log_prob"]  # the chapter's idea applied to a case the book has not shown
 
 LOG_2PI = float(np.log(2.0 * np.pi))  # log 2π, in every Gaussian log-density
 
 
 def log_softmax(logits: np.ndarray) -> np.ndarray:
-    """log π_j = z_j − log Σ_i exp z_i for every row of logits z of shape (n, k); returns (n, k).
+    """log π_j = log softmax(z)_j for every row of logits z of shape (n, k); returns (n, k).
 
-    Subtract each row's maximum first: the result is the same (log Σ exp shifts by exactly that maximum), but
-    exp(z − max z) lies in (0, 1], so nothing overflows, and logits of ±1000 give finite log-probabilities such as
-    −2000 rather than −inf or NaN. The other categorical functions can build on it.
+    It must stay finite for logits of ±1000 (log-probabilities such as −2000, never −inf or NaN): find a way to
+    compute it in which nothing overflows. The other categorical functions can build on it.
     """
     raise NotImplementedError("write log_softmax, then run: minippo grade 2")
 
 
 def categorical_log_prob(logits: np.ndarray, actions: np.ndarray) -> np.ndarray:
-    """log π(a_n|s_n) = z_{n,a_n} − log Σ_j exp z_{n,j}.
+    """log π(a_n|s_n) of the categorical (2.1), the log-probability of each row's action.
 
-    logits: (n, k) floats.  actions: (n,) integers in 0..k−1.  Returns (n,) floats, finite even when a logit is
-    ±1000 (an action that is almost never taken has a very negative log-probability, not −inf or NaN).
+    logits: (n, k) floats, k actions.  actions: (n,) integers in 0..k−1.  Returns (n,) floats, finite even when a logit
+    is ±1000 (an action that is almost never taken has a very negative log-probability, not −inf or NaN).
     """
     raise NotImplementedError("write categorical_log_prob, then run: minippo grade 2")
 
 
 def categorical_log_prob_backward(logits: np.ndarray, actions: np.ndarray, grad_logp: np.ndarray) -> np.ndarray:
-    """∂L/∂z from ∂L/∂ log π: ∂ log π(a|s)/∂z_j = 1[j = a] − π_j.
+    """∂L/∂z from ∂L/∂ log π: the categorical's score (2.4), times the upstream gradient.
 
-    logits: (n, k).  actions: (n,) integers.  grad_logp: (n,), ∂L/∂ log π(a_n|s_n).
-    Returns (n, k): row n is grad_logp_n · (onehot(a_n) − π(·|s_n)).
+    logits: (n, k).  actions: (n,) integers.  grad_logp: (n,), ∂L/∂ log π(a_n|s_n).  Returns ∂L/∂z, (n, k).
     """
     raise NotImplementedError("write categorical_log_prob_backward, then run: minippo grade 2")
 
 
 def categorical_entropy(logits: np.ndarray) -> np.ndarray:
-    """S = −Σ_j π_j log π_j for every row.
+    """The entropy S[π(·|s_n)] of every row's categorical, in nats.
 
     logits: (n, k).  Returns (n,), between 0 (one certain action) and log k (uniform). A probability that rounds
-    to 0 contributes 0 (p log p → 0), never NaN.
+    to 0 contributes 0, never NaN.
     """
     raise NotImplementedError("write categorical_entropy, then run: minippo grade 2")
 
 
 def categorical_entropy_backward(logits: np.ndarray, grad_entropy: np.ndarray) -> np.ndarray:
-    """∂L/∂z from ∂L/∂S: ∂S/∂z_j = −π_j (log π_j + S).
+    """∂L/∂z from ∂L/∂S, S the entropy of categorical_entropy: derive ∂S/∂z yourself.
 
     logits: (n, k).  grad_entropy: (n,), ∂L/∂S_n.  Returns (n, k).
     """
@@ -77,36 +76,45 @@ def categorical_entropy_backward(logits: np.ndarray, grad_entropy: np.ndarray) -
 
 
 def gaussian_log_prob(mean: np.ndarray, log_std: np.ndarray, actions: np.ndarray) -> np.ndarray:
-    """log π(a|s) = Σ_i [ −½ ((a_i − μ_i)/σ_i)² − log σ_i − ½ log 2π ],  σ_i = exp(log σ_i).
+    """log π(a|s) of the diagonal Gaussian (2.2) with mean μ(s) and standard deviations σ = exp(log σ).
 
-    mean: (n, d).  log_std: (d,), shared by every row.  actions: (n, d).  Returns (n,).
+    mean: (n, d), d the action's dimensions.  log_std: (d,), shared by every row.  actions: (n, d).  Returns (n,).
     """
     raise NotImplementedError("write gaussian_log_prob, then run: minippo grade 2")
 
 
 def gaussian_log_prob_backward(mean: np.ndarray, log_std: np.ndarray, actions: np.ndarray, grad_logp: np.ndarray):
-    """∂L/∂μ and ∂L/∂ log σ from ∂L/∂ log π.
+    """∂L/∂μ and ∂L/∂ log σ from ∂L/∂ log π, the Gaussian's scores (2.5) and (2.6) times the upstream gradient.
 
-        ∂ log π/∂μ_i     = (a_i − μ_i) / σ_i²
-        ∂ log π/∂ log σ_i = ((a_i − μ_i)/σ_i)² − 1
-    grad_logp: (n,).  Returns (grad_mean of shape (n, d), grad_log_std of shape (d,)). log σ is one vector shared by
-    all n rows, so its gradient is the sum over the batch of each row's contribution.
+    mean: (n, d).  log_std: (d,).  actions: (n, d).  grad_logp: (n,).  Returns (grad_mean of shape (n, d),
+    grad_log_std of shape (d,)). log σ is one vector shared by all n rows.
     """
     raise NotImplementedError("write gaussian_log_prob_backward, then run: minippo grade 2")
 
 
 def gaussian_entropy(mean: np.ndarray, log_std: np.ndarray) -> np.ndarray:
-    """S = Σ_i (log σ_i + ½ log 2πe), the same for every state.
+    """The entropy of the diagonal Gaussian (2.2), in nats, the same for every state: derive it from the density.
 
-    mean: (n, d), used only for n.  log_std: (d,).  Returns (n,), every entry equal.
+    mean: (n, d), used only for n and d.  log_std: (d,).  Returns (n,), every entry equal.
     """
     raise NotImplementedError("write gaussian_entropy, then run: minippo grade 2")
 
 
 def gaussian_entropy_backward(mean: np.ndarray, log_std: np.ndarray, grad_entropy: np.ndarray):
-    """∂L/∂μ and ∂L/∂ log σ from ∂L/∂S: ∂S/∂μ = 0 and ∂S/∂ log σ_i = 1.
+    """∂L/∂μ and ∂L/∂ log σ from ∂L/∂S, S the entropy of gaussian_entropy.
 
-    grad_entropy: (n,).  Returns (grad_mean of shape (n, d), all zeros, and grad_log_std of shape (d,)), the latter
-    summed over the batch like gaussian_log_prob_backward's.
+    mean: (n, d).  log_std: (d,).  grad_entropy: (n,).  Returns (grad_mean of shape (n, d), grad_log_std of shape (d,)),
+    log σ shared by all rows as in gaussian_log_prob_backward.
     """
     raise NotImplementedError("write gaussian_entropy_backward, then run: minippo grade 2")
+
+
+def tempered_categorical_log_prob(logits: np.ndarray, temperature: float, actions: np.ndarray):
+    """Transfer task: a categorical policy with a temperature τ, π = softmax(z / τ), and its score.
+
+    logits: (n, k).  temperature: τ > 0, one number shared by every row.  actions: (n,) integers in 0..k−1.
+    Returns (logp, grad_logits, grad_temperature): logp (n,) the log-probability of each row's action;
+    grad_logits (n, k) = ∂ log π(a_n|s_n)/∂z_n; grad_temperature (n,) = ∂ log π(a_n|s_n)/∂τ, one per row (not summed).
+    Finite for logits of ±1000 with τ ≥ 0.5. τ = 1 is chapter 2's categorical.
+    """
+    raise NotImplementedError("write tempered_categorical_log_prob, then run: minippo grade 2")

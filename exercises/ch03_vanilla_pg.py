@@ -15,22 +15,33 @@ from __future__ import annotations
 import numpy as np
 
 EXERCISES = ["pg_objective", "normalize_advantages"]
+TRANSFER = ["linear_softmax_policy_gradient"]  # the chapter's idea applied to a case the book has not shown
 
 
 def pg_objective(logp: np.ndarray, advantages: np.ndarray):
-    """L^PG = Ê_t[log π_θ(a_t|s_t) Â_t]  (eq. 2), the mean over the n samples of the batch.
+    """L^PG, the paper's eq. 2 (the book's (3.1)), the mean over the n samples of the batch, and its gradient.
 
-    logp: (n,) log π_θ(a_t|s_t).  advantages: (n,) Â_t, constants (no gradient flows into them).
-    Returns (value, grad): value a Python float; grad of shape (n,) is ∂L^PG/∂ log π_t = Â_t / n.
+    logp: (n,) log π_θ(a_t|s_t), the variable.  advantages: (n,) Â_t, constants (no gradient flows into them).
+    Returns (value, grad): value a Python float; grad of shape (n,) is ∂L^PG/∂ log π_θ(a_t|s_t), one entry per sample.
     """
     raise NotImplementedError("write pg_objective, then run: minippo grade 3")
 
 
 def normalize_advantages(advantages: np.ndarray) -> np.ndarray:
-    """(Â − mean Â) / (std Â + 1e-8): a baseline (the mean) and a common scale for one minibatch.
+    """The advantages of one minibatch shifted to mean 0 and scaled to standard deviation 1: a baseline and a scale.
 
-    advantages: (n,).  Returns a new (n,) array with mean 0 and standard deviation (nearly) 1; std is the
-    population standard deviation (np.std). A batch of one sample has no spread to measure: return it unchanged
-    (a copy). Equal advantages give zeros, never NaN (that is what the 1e-8 is for).
+    advantages: (n,).  Returns a new (n,) array. Use the population standard deviation (np.std) and add 1e-8 to it
+    before dividing, so that equal advantages give zeros, never NaN. A batch of one sample has no spread to measure:
+    return it unchanged (a copy).
     """
     raise NotImplementedError("write normalize_advantages, then run: minippo grade 3")
+
+
+def linear_softmax_policy_gradient(features: np.ndarray, theta: np.ndarray, actions: np.ndarray, advantages):
+    """Transfer task: L^PG's gradient carried all the way to the parameters of a linear softmax policy.
+
+    The policy: π_θ(·|s_t) = softmax(s_t θ), features s_t one row of ``features``.
+    features: (n, d).  theta: (d, k).  actions: (n,) integers in 0..k−1.  advantages: (n,) Â_t, constants.
+    Returns (value, grad): value = L^PG (eq. 2, the mean over the batch) as a float; grad = ∂L^PG/∂θ, (d, k).
+    """
+    raise NotImplementedError("write linear_softmax_policy_gradient, then run: minippo grade 3")

@@ -14,10 +14,11 @@ from __future__ import annotations
 import numpy as np
 
 EXERCISES = ["importance_ratio", "cpi_objective"]
+TRANSFER = ["weighted_cpi_objective"]  # the chapter's idea applied to a case the book has not shown
 
 
 def importance_ratio(logp: np.ndarray, logp_old: np.ndarray) -> np.ndarray:
-    """r_t = π_θ(a_t|s_t) / π_θold(a_t|s_t), computed from log-probabilities as exp(log π_θ − log π_θold).
+    """r_t = π_θ(a_t|s_t) / π_θold(a_t|s_t), the book's (4.2), from the two log-probabilities.
 
     logp, logp_old: (n,).  Returns (n,), finite and correct even when both log-probabilities are very negative
     (−800 and −801 give e, although exp(−800) underflows to 0).
@@ -26,10 +27,23 @@ def importance_ratio(logp: np.ndarray, logp_old: np.ndarray) -> np.ndarray:
 
 
 def cpi_objective(logp: np.ndarray, logp_old: np.ndarray, advantages: np.ndarray):
-    """L^CPI = Ê_t[r_t(θ) Â_t]  (eq. 6).
+    """L^CPI, the paper's eq. 6 (the book's (4.3)), the mean over the batch, and its gradient.
 
     logp: (n,) log π_θ, the variable.  logp_old: (n,) log π_θold, a constant.  advantages: (n,) constants.
-    Returns (value, grad): value a float; grad = ∂L^CPI/∂ log π_t = r_t Â_t / n, shape (n,), because
-    ∂r_t/∂ log π_t = r_t. At θ = θ_old (r = 1) it equals the policy gradient of L^PG.
+    Returns (value, grad): value a float; grad = ∂L^CPI/∂ log π_θ(a_t|s_t), shape (n,). At θ = θ_old it must equal
+    the gradient of L^PG.
     """
     raise NotImplementedError("write cpi_objective, then run: minippo grade 4")
+
+
+def weighted_cpi_objective(logp: np.ndarray, logp_old: np.ndarray, advantages: np.ndarray):
+    """Transfer task: the importance-weighted surrogate with *self-normalised* weights, and its gradient.
+
+    The value: Σ_t r_t Â_t / Σ_t r_t, the ratios r_t of chapter 4 normalised to sum to one over the batch (weighted
+    importance sampling: a biased estimate with a smaller variance than L^CPI's mean). Every r_t enters the
+    denominator too.
+    logp: (n,) the variable.  logp_old, advantages: (n,) constants.
+    Returns (value, grad): value a float, finite for log-probabilities near −800; grad = ∂value/∂ log π_θ(a_t|s_t),
+    shape (n,).
+    """
+    raise NotImplementedError("write weighted_cpi_objective, then run: minippo grade 4")

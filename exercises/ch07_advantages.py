@@ -7,10 +7,10 @@ value V(s_t) (``values``), the value of the observation that followed it (``next
 - ``truncated[t]``: a time limit cut the episode at step t; the state was not terminal, so bootstrap from
   next_values[t], which holds V of the episode's final observation.
 Either way step t+1 starts a new episode, so nothing flows back across the boundary. A step with both flags set
-terminated (no bootstrap). The last step of the batch is cut by the horizon: bootstrap it from next_values[T−1] unless
-it terminated. With (T, N) arrays every column is its own environment with its own episode ends, so work element by
-element (np.where, not a Python ``if`` on an array). Every result is a new float64 array, whatever float type the
-inputs have.
+counts as terminated: it is not bootstrapped. The last step of the batch is cut by the horizon: bootstrap it from
+next_values[T−1] unless it terminated. With (T, N) arrays every column is its own environment with its own episode
+ends, so work element by element (np.where, not a Python ``if`` on an array). Every result is a new float64 array,
+whatever float type the inputs have.
 
 Grade: ``minippo grade 7``
 """
@@ -20,14 +20,13 @@ from __future__ import annotations
 import numpy as np
 
 EXERCISES = ["discounted_returns", "td_residuals", "gae"]
+TRANSFER = ["gae_with_step_discounts"]  # the chapter's idea applied to a case the book has not shown
 
 
 def discounted_returns(rewards, next_values, terminated, truncated, gamma: float) -> np.ndarray:
-    """G_t, the discounted return from step t to the end of its episode, bootstrapped where it was cut.
+    """G_t, the discounted return from step t to the end of its episode, bootstrapped from next_values where the episode
+    was cut (a truncation, or the batch's last step) and not where it terminated.
 
-        G_t = r_t                      if terminated[t]
-        G_t = r_t + γ next_values[t]   if truncated[t], or t = T−1 (and not terminated)
-        G_t = r_t + γ G_{t+1}          otherwise
     rewards, next_values: float arrays (T,) or (T, N); terminated, truncated: bool arrays of the same shape.
     Returns a new float64 array of the same shape.
     """
@@ -35,19 +34,33 @@ def discounted_returns(rewards, next_values, terminated, truncated, gamma: float
 
 
 def td_residuals(rewards, values, next_values, terminated, gamma: float) -> np.ndarray:
-    """δ_t = r_t + γ V(s_{t+1}) − V(s_t)  (eq. 12), with V(s_{t+1}) = next_values[t], or 0 where terminated[t].
+    """δ_t, the TD residual of the paper's eq. 12 (the book's (7.1)), with V(s_{t+1}) = next_values[t], and nothing to
+    bootstrap from where the step terminated.
 
     Arrays of shape (T,) or (T, N). Returns a new float64 array of the same shape. A value function that is exact
-    (V(s_t) = r_t + γ V(s_{t+1}) everywhere) gives δ = 0.
+    gives δ = 0.
     """
     raise NotImplementedError("write td_residuals, then run: minippo grade 7")
 
 
 def gae(rewards, values, next_values, terminated, truncated, gamma: float, lam: float) -> np.ndarray:
-    """Truncated GAE (eq. 11): Â_t = δ_t + (γλ) δ_{t+1} + (γλ)² δ_{t+2} + ..., summed to the end of t's episode.
+    """Â_t, truncated GAE (the paper's eq. 11, the book's (7.2)): the (γλ)-discounted sum of TD residuals from step t to
+    the end of t's episode (a termination, a truncation, or the batch's last step; the bootstrap at a cut is already
+    inside that step's δ).
 
-    Computed backwards: Â_{T−1} = δ_{T−1}, and Â_t = δ_t + γλ Â_{t+1} inside an episode, Â_t = δ_t at a step that
-    ended its episode (terminated or truncated; the bootstrap is already inside δ_t). λ = 0 gives δ_t; λ = 1 gives the
-    discounted return minus V(s_t). Arrays of shape (T,) or (T, N); returns a new float64 array of the same shape.
+    Arrays of shape (T,) or (T, N). Returns a new float64 array of the same shape. λ = 0 gives δ_t; λ = 1 gives the
+    discounted return minus V(s_t).
     """
     raise NotImplementedError("write gae, then run: minippo grade 7")
+
+
+def gae_with_step_discounts(rewards, values, next_values, terminated, truncated, gammas, lam: float) -> np.ndarray:
+    """Transfer task: GAE when every step has its own discount, as when steps last different times (γ_t = γ^{Δt_t}).
+
+    gammas[t] discounts what follows step t: its bootstrap V(s_{t+1}) and everything after it. With every
+    gammas[t] = γ this is chapter 7's gae. The flags, the bootstrap at a truncation or at the batch's last step and
+    the episode ends are gae's.
+    rewards, values, next_values, gammas: (T,) floats.  terminated, truncated: (T,) bools.  lam: λ.
+    Returns Â, a new (T,) float64 array.
+    """
+    raise NotImplementedError("write gae_with_step_discounts, then run: minippo grade 7")

@@ -17,26 +17,26 @@ import numpy as np
 from minippo.losses import clip_objective  # noqa: F401 - for your solution
 
 EXERCISES = ["value_loss", "clipped_value_loss", "clip_vf_s_objective"]
+TRANSFER = ["huber_value_loss"]  # the chapter's idea applied to a case the book has not shown
 
 
 def value_loss(values: np.ndarray, value_targets: np.ndarray):
-    """L^VF = ½ Ê[(V_t − V^targ_t)²], a loss to *minimise*, and its gradient.
+    """L^VF = ½ Ê[(V_θ(s_t) − V^targ_t)²] (the book's (8.2), with its ½), a loss to *minimise*, and its gradient.
 
     values: (n,) V_θ(s_t), the variable.  value_targets: (n,) V^targ_t, constants.
-    Returns (loss, grad): loss a float; grad = ∂L^VF/∂V_t = (V_t − V^targ_t) / n, shape (n,).
+    Returns (loss, grad): loss a float; grad = ∂L^VF/∂V_θ(s_t), shape (n,).
     """
     raise NotImplementedError("write value_loss, then run: minippo grade 8")
 
 
 def clipped_value_loss(values: np.ndarray, value_targets: np.ndarray, values_old: np.ndarray, epsilon: float):
-    """The value loss with the update of V clipped to ±ε around the rollout's values (one of the "37 details").
+    """The value loss with the update of V clipped to ±ε around the rollout's values (one of the "37 details"):
+    V^clip_t = V_old,t + clip(V_t − V_old,t, −ε, ε), and the loss takes, sample by sample, the larger of the two squared
+    errors, (V_t − V^targ_t)² and (V^clip_t − V^targ_t)², with value_loss's ½ and mean.
 
-        V^clip_t = V_old,t + clip(V_t − V_old,t, −ε, ε)
-        L = ½ Ê[max((V_t − V^targ_t)², (V^clip_t − V^targ_t)²)]      (pessimistic, like L^CLIP's min)
     values: (n,) the variable.  value_targets, values_old: (n,) constants.  epsilon: ε > 0.
-    Returns (loss, grad), grad = ∂L/∂V_t of shape (n,): (V_t − V^targ_t)/n where the unclipped error is the larger
-    (or the two are equal); (V^clip_t − V^targ_t)/n where the clipped error is larger and |V_t − V_old,t| ≤ ε;
-    0 where the clipped error is larger and V_t is outside the band (V^clip is a constant there).
+    Returns (loss, grad), grad = ∂L/∂V_t of shape (n,). Where the two errors are equal, use the unclipped one's
+    derivative; V_t exactly on an edge of the band, |V_t − V_old,t| = ε, counts as inside it.
     """
     raise NotImplementedError("write clipped_value_loss, then run: minippo grade 8")
 
@@ -52,11 +52,24 @@ def clip_vf_s_objective(
     c1: float,
     c2: float,
 ):
-    """L^{CLIP+VF+S} = L^CLIP − c1 L^VF + c2 Ê[S_t]  (eq. 9), an objective to *maximise*, and its three gradients.
+    """L^{CLIP+VF+S}, the paper's eq. 9 (the book's (8.1)), an objective to *maximise*, and its three gradients.
 
     logp, logp_old, advantages: (n,) as for L^CLIP (chapter 6; minippo.losses.clip_objective computes it).
     values, value_targets: (n,) as for value_loss (with its ½).  entropy: (n,) S[π_θ](s_t), the variable of the bonus.
+    epsilon, c1, c2: ε and the paper's coefficients.
     Returns (value, grad_logp, grad_values, grad_entropy): value a float, and ∂L/∂ log π_t, ∂L/∂V_t, ∂L/∂S_t, each of
-    shape (n,). The value term enters with a minus (a larger error lowers the objective); the entropy with a plus.
+    shape (n,).
     """
     raise NotImplementedError("write clip_vf_s_objective, then run: minippo grade 8")
+
+
+def huber_value_loss(values: np.ndarray, value_targets: np.ndarray, delta: float):
+    """Transfer task: a value loss that grows linearly for large errors, and its gradient.
+
+    The Huber loss (Huber 1964) of each error e_t = V_t − V^targ_t with threshold δ > 0: ½ e² where |e| ≤ δ, and
+    beyond it the straight line that continues ½ e² with the same value and slope at |e| = δ. The loss is its mean
+    over the batch, a loss to *minimise*.
+    values: (n,) the variable.  value_targets: (n,) constants.  delta: δ > 0.
+    Returns (loss, grad): loss a float; grad = ∂loss/∂V_t, shape (n,).
+    """
+    raise NotImplementedError("write huber_value_loss, then run: minippo grade 8")

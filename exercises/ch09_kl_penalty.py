@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 EXERCISES = ["categorical_kl", "categorical_kl_backward", "kl_penalty_objective", "adaptive_beta"]
+TRANSFER = ["reverse_kl_backward"]  # the chapter's idea applied to a case the book has not shown
 
 
 def log_softmax(logits: np.ndarray) -> np.ndarray:
@@ -24,37 +25,46 @@ def log_softmax(logits: np.ndarray) -> np.ndarray:
 
 
 def categorical_kl(logits_old: np.ndarray, logits: np.ndarray) -> np.ndarray:
-    """KL[π_old ‖ π] = Σ_j π_old,j (log π_old,j − log π_j) for every row: ≥ 0, and 0 only where the two agree.
+    """KL[π_old ‖ π] for every row, the old policy first (the book's (2.1)): ≥ 0, and 0 only where the two agree.
 
-    logits_old, logits: (n, k).  Returns (n,), finite for logits of ±1000 (use log-softmax, not log of softmax).
+    logits_old, logits: (n, k).  Returns (n,), finite for logits of ±1000.
     """
     raise NotImplementedError("write categorical_kl, then run: minippo grade 9")
 
 
 def categorical_kl_backward(logits_old: np.ndarray, logits: np.ndarray, grad_kl: np.ndarray) -> np.ndarray:
-    """∂L/∂z (the new logits only; the old policy is a constant) from ∂L/∂KL: ∂KL/∂z_j = π_j − π_old,j.
+    """∂L/∂z for the new logits z (the old policy is a constant) from ∂L/∂KL, KL as in categorical_kl: derive ∂KL/∂z.
 
-    grad_kl: (n,).  Returns (n, k).
+    logits_old, logits: (n, k).  grad_kl: (n,).  Returns (n, k).
     """
     raise NotImplementedError("write categorical_kl_backward, then run: minippo grade 9")
 
 
 def kl_penalty_objective(logp, logp_old, advantages, kl, beta: float):
-    """L^KLPEN = Ê[r_t Â_t − β KL_t]  (eq. 8's surrogate), to maximise.
+    """L^KLPEN, eq. 8's surrogate (the book's (9.1)), to maximise, and its gradients with respect to both variables.
 
     logp: (n,) the variable of the first term.  logp_old, advantages: (n,) constants.  kl: (n,) KL_t, the variable of
     the penalty (categorical_kl, or the Gaussian one).  beta: β ≥ 0.
-    Returns (value, grad_logp, grad_kl): value a float; grad_logp = r_t Â_t / n; grad_kl = −β / n, both (n,).
+    Returns (value, grad_logp, grad_kl): value a float; grad_logp = ∂L/∂ log π_θ(a_t|s_t) and grad_kl = ∂L/∂KL_t,
+    both (n,).
     """
     raise NotImplementedError("write kl_penalty_objective, then run: minippo grade 9")
 
 
 def adaptive_beta(beta: float, kl: float, kl_target: float) -> float:
-    """Eq. 8's rule, applied after each policy update with d = Ê[KL] measured on the batch:
+    """Eq. 8's rule for β, applied after each policy update with d = Ê[KL] measured on the batch against the target
+    d_targ, with the paper's constants 1.5 and 2. At exactly d_targ / 1.5 or d_targ × 1.5, β is unchanged.
 
-        if d < d_targ / 1.5:  β ← β / 2
-        if d > d_targ × 1.5:  β ← β × 2
-        otherwise β is unchanged (also at exactly d_targ / 1.5 or d_targ × 1.5).
-    Returns the new β as a float.
+    beta: the current β.  kl: d.  kl_target: d_targ.  Returns the new β as a float.
     """
     raise NotImplementedError("write adaptive_beta, then run: minippo grade 9")
+
+
+def reverse_kl_backward(logits_old: np.ndarray, logits: np.ndarray, grad_kl: np.ndarray):
+    """Transfer task: the other KL, KL[π ‖ π_old] (the new policy first), and its gradient in the new logits.
+
+    logits_old, logits: (n, k).  grad_kl: (n,), ∂L/∂KL_n.
+    Returns (kl, grad_logits): kl (n,) = KL[π(·|s_n) ‖ π_old(·|s_n)] per row, ≥ 0, finite for logits of ±1000;
+    grad_logits (n, k) = ∂L/∂z for the new logits z (the old policy a constant).
+    """
+    raise NotImplementedError("write reverse_kl_backward, then run: minippo grade 9")

@@ -4,9 +4,8 @@ backward, by hand.
 
 Images are NHWC arrays, (n, H, W, C), channels last, as MinAtar gives them; a kernel K is (kh, kw, C, F), F the
 number of filters (output channels); a bias b is (F,). The convolution is deep learning's: a cross-correlation, the
-kernel not flipped, with stride 1 and no padding ("valid"), so the output is (n, H − kh + 1, W − kw + 1, F):
-
-    y[n, i, j, f] = b[f] + Σ_{p < kh} Σ_{q < kw} Σ_{c < C} x[n, i + p, j + q, c] K[p, q, c, f].
+kernel not flipped, with stride 1 and no padding ("valid"), so the output is (n, H − kh + 1, W − kw + 1, F): the book's
+(12.1), with a bias per filter.
 
 Grade: ``minippo grade 12``
 """
@@ -16,14 +15,11 @@ from __future__ import annotations
 import numpy as np
 
 EXERCISES = ["conv2d_forward", "conv2d_backward"]
+TRANSFER = ["max_pool2d_backward"]  # the chapter's idea applied to a case the book has not shown
 
 
 def conv2d_forward(x: np.ndarray, K: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The valid cross-correlation of a batch of images with F kernels, plus a bias per kernel:
-
-        y[n, i, j, f] = b[f] + Σ_{p, q, c} x[n, i + p, j + q, c] K[p, q, c, f]
-
-    for 0 ≤ i < H − kh + 1 and 0 ≤ j < W − kw + 1, the sum over 0 ≤ p < kh, 0 ≤ q < kw and every input channel c.
+    """The valid cross-correlation of a batch of images with F kernels, plus a bias per kernel: the book's (12.1).
 
     x: (n, H, W, C) images, channels last.  K: (kh, kw, C, F); kh ≤ H and kw ≤ W, not necessarily square.  b: (F,).
     Returns y, (n, H − kh + 1, W − kw + 1, F) float64, a new array.
@@ -32,17 +28,22 @@ def conv2d_forward(x: np.ndarray, K: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def conv2d_backward(x: np.ndarray, K: np.ndarray, grad_y: np.ndarray, need_grad_x: bool = True):
-    """Given grad_y = ∂L/∂y for y = conv2d_forward(x, K, b), return (∂L/∂x, ∂L/∂K, ∂L/∂b):
-
-        ∂L/∂K[p, q, c, f] = Σ_{n, i, j} x[n, i + p, j + q, c] ∂L/∂y[n, i, j, f]
-        ∂L/∂b[f]          = Σ_{n, i, j} ∂L/∂y[n, i, j, f]
-        ∂L/∂x[n, a, e, c] = Σ_{p, q, f} ∂L/∂y[n, a − p, e − q, f] K[p, q, c, f],
-
-    the last sum over the (p, q) for which (a − p, e − q) is an output pixel: an input pixel lies in the receptive
-    field of up to kh·kw output pixels, and it receives the gradient of every one of them (they add up).
+    """Given grad_y = ∂L/∂y for y = conv2d_forward(x, K, b), return (∂L/∂x, ∂L/∂K, ∂L/∂b): the book's (12.2) and (12.3).
 
     x: (n, H, W, C).  K: (kh, kw, C, F).  grad_y: (n, H − kh + 1, W − kw + 1, F).  Returns grad_x (n, H, W, C), or
     None when need_grad_x is False (the first layer's input needs no gradient); grad_K (kh, kw, C, F); grad_b (F,);
     all float64 and new arrays.
     """
     raise NotImplementedError("write conv2d_backward, then run: minippo grade 12")
+
+
+def max_pool2d_backward(x: np.ndarray, size: int, grad_y: np.ndarray) -> np.ndarray:
+    """Transfer task: the backward pass of max pooling, a layer this chapter's network does not have.
+
+    Forward (given): each channel of each image is cut into non-overlapping size × size windows (H and W multiples of
+    size), and y[n, i, j, c] = max over the window's pixels x[n, size·i + p, size·j + q, c], 0 ≤ p, q < size.
+    x: (n, H, W, C).  size: the window's side.  grad_y: (n, H / size, W / size, C), ∂L/∂y.
+    Returns ∂L/∂x, (n, H, W, C), a new float64 array. Where a window's maximum is reached by several pixels, the
+    gradient goes to the first of them in row-major order (smallest p, then smallest q), as np.argmax picks it.
+    """
+    raise NotImplementedError("write max_pool2d_backward, then run: minippo grade 12")

@@ -12,11 +12,12 @@ from __future__ import annotations
 import numpy as np
 
 EXERCISES = ["group_advantages", "grpo_objective", "dpo_loss"]
+TRANSFER = ["ipo_loss"]  # the chapter's idea applied to a case the book has not shown
 
 
 def group_advantages(scores: np.ndarray, eps: float = 1e-8) -> np.ndarray:
-    """The group-relative advantage of every response: its score minus the mean of its group, divided by the
-    standard deviation of its group (the population one, ddof = 0) plus ``eps``.
+    """The group-relative advantage of every response (the book's (14.1)), with the standard deviation of its group the
+    population one (ddof = 0), ``eps`` added to it before dividing.
 
     scores: (m, G), row i the scores of the G responses to prompt i.  Returns (m, G) float64.
     """
@@ -24,10 +25,8 @@ def group_advantages(scores: np.ndarray, eps: float = 1e-8) -> np.ndarray:
 
 
 def grpo_objective(logp, logp_old, logp_ref, advantages, weights, epsilon: float, beta: float):
-    """GRPO's objective over a minibatch of tokens, to be maximised, and its gradient:
-
-        J = Σ_t w_t [min(r_t Â_t, clip(r_t, 1 − ε, 1 + ε) Â_t) − β k3_t],
-        r_t = π_θ(a_t|s_t) / π_θold(a_t|s_t),   k3_t = π_ref/π_θ − log(π_ref/π_θ) − 1   (of token t).
+    """GRPO's objective over a minibatch of tokens (the book's (14.2), the per-token KL estimate k3 of (14.3)), each
+    token weighted by w_t, to be maximised, and its gradient.
 
     logp, logp_old, logp_ref: (n,) log π_θ, log π_θold and log π_ref of the n tokens' actions; advantages: (n,) Â_t;
     weights: (n,) w_t (1 / (responses × its response's length) in GRPO). Returns (J as a float, ∂J/∂ log π_θ (n,)),
@@ -38,12 +37,25 @@ def grpo_objective(logp, logp_old, logp_ref, advantages, weights, epsilon: float
 
 
 def dpo_loss(logp_preferred, logp_rejected, ref_preferred, ref_rejected, beta: float):
-    """The DPO loss over n pairs, L = −Ê[log σ(Δ)] with the margin of implicit rewards
-    Δ = β [(log π_θ(y_w|x) − log π_ref(y_w|x)) − (log π_θ(y_l|x) − log π_ref(y_l|x))], and its gradient.
+    """The DPO loss over n pairs (the book's (14.5)), the mean over the pairs, and its gradient.
 
     logp_preferred, logp_rejected: (n,) sequence log-probabilities of the preferred (y_w) and rejected (y_l)
-    responses under the policy π_θ; ref_preferred, ref_rejected: the same under the frozen reference π_ref.
+    responses under the policy π_θ; ref_preferred, ref_rejected: the same under the frozen reference π_ref.  beta: β.
     Returns (loss, grad_preferred, grad_rejected): the loss as a float, and ∂L/∂ log π_θ(y_w|x) and
     ∂L/∂ log π_θ(y_l|x), both (n,). It must stay finite for margins of ±1000.
     """
     raise NotImplementedError("write dpo_loss, then run: minippo grade 14")
+
+
+def ipo_loss(logp_preferred, logp_rejected, ref_preferred, ref_rejected, tau: float):
+    """Transfer task: IPO's loss (Azar et al. 2023), DPO's pairs with a squared loss in place of −log σ, and its
+    gradient.
+
+    For each pair, h = (log π_θ(y_w|x) − log π_ref(y_w|x)) − (log π_θ(y_l|x) − log π_ref(y_l|x)); the loss is the mean
+    over the n pairs of (h − 1/(2τ))², which pulls every margin h to the same target 1/(2τ) instead of pushing it up
+    without end as DPO's does.
+    logp_preferred, logp_rejected, ref_preferred, ref_rejected: (n,) as for dpo_loss.  tau: τ > 0.
+    Returns (loss, grad_preferred, grad_rejected): the loss as a float, and ∂L/∂ log π_θ(y_w|x) and
+    ∂L/∂ log π_θ(y_l|x), both (n,).
+    """
+    raise NotImplementedError("write ipo_loss, then run: minippo grade 14")

@@ -27,6 +27,7 @@ from minippo import losses
 from minippo.optimizer import clip_grad_norm
 
 EXERCISES = ["loss_and_grad", "ppo_update", "collect"]
+TRANSFER = ["shared_trunk_gradient"]  # the chapter's idea applied to a case the book has not shown
 
 
 def loss_and_grad(agent, minibatch: dict, config) -> float:
@@ -36,13 +37,10 @@ def loss_and_grad(agent, minibatch: dict, config) -> float:
     "advantages" (Â_t), "returns" (V^targ_t); ignore any other keys.
     config: a minippo.ppo.Config; use clip_epsilon (ε), value_coef (c1), entropy_coef (c2), normalize_advantages,
     whatever their values (the tests change each of them).
-        1. Â ← (Â − mean Â) / (std Â + 1e-8) over this minibatch, if config.normalize_advantages and n > 1 (np.std,
-           the population standard deviation; chapter 3)
-        2. L^CLIP with ε and its gradient in log π                                     (chapter 6)
-        3. L^VF = ½ Ê[(V − V^targ)²] and its gradient in V (no value clipping here)     (chapter 8)
-        4. S = Ê[entropy of π_θ(·|s_t)], only when c2 ≠ 0                               (chapter 2)
-        5. loss = −(L^CLIP − c1 L^VF + c2 S); carry ∂loss/∂ log π and ∂loss/∂S back through the distribution (add up
-           what their *_backward return), then call agent.backward with those and ∂loss/∂V.
+    The pieces: the advantages normalised over this minibatch as chapter 3's normalize_advantages does, when
+    config.normalize_advantages and n > 1; L^CLIP (chapter 6); L^VF with chapter 8's ½ and no value clipping; the mean
+    entropy S of π_θ(·|s_t) (chapter 2), computed only when c2 ≠ 0. Carry the loss's gradient back through the
+    distribution and the network (the agent's methods above) into agent.grads.
     Returns the loss as a float; agent.grads holds ∂loss/∂θ afterwards. agent.params and the minibatch are unchanged.
     """
     out, values, cache = agent.forward(minibatch["obs"])
@@ -193,3 +191,33 @@ def collect(policy, envs, obs_normalizer, raw_obs, horizon: int, action_bounds=N
         "truncated": truncated,
         "raw_obs": raw[T].copy(),
     }
+
+
+def shared_trunk_gradient(
+    features, policy_weights, value_weights, actions, logp_old, advantages, returns, epsilon: float, value_coef: float
+):
+    """Transfer task: where the policy's and the value's gradients meet, the output of a shared trunk.
+
+    A trunk (not given) maps each observation to features h_t; two linear heads read them: the logits
+    z_t = h_t W_π of a categorical policy, and the value V_t = h_t w_V.
+    features: (n, d) h, the variable.  policy_weights: (d, k) W_π.  value_weights: (d,) w_V.  actions: (n,) integers.
+    logp_old, advantages, returns: (n,) log π_θold(a_t|s_t), Â_t (used as given, not normalised) and V^targ_t.
+    epsilon: ε of L^CLIP.  value_coef: c1.  No entropy bonus here.
+    Returns (loss, grad_features): the loss to minimise, −(L^CLIP − c1 L^VF) with chapter 8's L^VF (its ½), as a
+    float, and ∂loss/∂h, shape (n, d).
+    """
+    n = len(actions)
+    rows, actions = np.arange(n), actions.astype(np.int64)
+    logits = features @ policy_weights
+    shifted = logits - logits.max(axis=1, keepdims=True)
+    log_probs = shifted - np.log(np.exp(shifted).sum(axis=1, keepdims=True))
+    clip_value, grad_logp = losses.clip_objective(log_probs[rows, actions], logp_old, advantages, epsilon)
+    values = features @ value_weights
+    error = values - returns
+    loss = -clip_value + value_coef * 0.5 * float(np.mean(error * error))
+    score = -np.exp(log_probs)
+    score[rows, actions] += 1.0
+    grad_logits = -score * grad_logp[:, None]
+    grad_values = value_coef * error / n
+    # both heads read the same h: their gradients add up there
+    return float(loss), grad_logits @ policy_weights.T + grad_values[:, None] * value_weights[None, :]

@@ -569,7 +569,7 @@ def where_is_ratio(r: float, epsilon: float) -> str:
     on |log r| would place it instead."""
     low, high = 1 - epsilon, 1 + epsilon
     side = "above the band" if r > high else "below the band" if r < low else "inside the band"
-    text = f"{side} ({low:g}, {high:g}): |r − 1| = {abs(r - 1):.3g} {'>' if abs(r - 1) > epsilon else '<'} ε"
+    text = f"{side} [{low:g}, {high:g}]: |r − 1| = {abs(r - 1):.3g} {'>' if abs(r - 1) > epsilon else '≤'} ε"
     if (abs(r - 1) > epsilon) != (abs(np.log(r)) > epsilon):
         log_side = ">" if abs(np.log(r)) > epsilon else "<"
         text += f", although |log r| = {abs(np.log(r)):.3g} {log_side} ε: the band is on r, not on log r"

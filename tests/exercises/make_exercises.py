@@ -1,7 +1,8 @@
 """Write exercises/ from solutions/, so that the two cannot drift apart.
 
-Every function named in a solution module's ``EXERCISES`` list keeps its signature and docstring (the contract) and
-loses its body, which becomes ``raise NotImplementedError(...)``; everything else in the module is copied as it is.
+Every function named in a solution module's ``EXERCISES`` or ``TRANSFER`` list keeps its signature and docstring (the
+contract) and loses its body, which becomes ``raise NotImplementedError(...)``; everything else in the module is copied
+as it is.
 
     python tests/exercises/make_exercises.py           # rewrite exercises/ch*.py from solutions/ch*.py
     python tests/exercises/make_exercises.py --check   # exit 1 if exercises/ is not what solutions/ gives
@@ -25,11 +26,24 @@ def chapter_of(name: str) -> int:
     return int(name[2:4])
 
 
-def exercise_names(tree: ast.Module) -> list[str]:
+def named_list(tree: ast.Module, name: str) -> list[str] | None:
     for node in tree.body:
-        if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == "EXERCISES" for t in node.targets):
+        if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == name for t in node.targets):
             return list(ast.literal_eval(node.value))
-    raise ValueError("a solution module needs an EXERCISES list")
+    return None
+
+
+def transfer_names(tree: ast.Module) -> list[str]:
+    """The module's transfer task: the chapter's idea applied to a case the book has not shown (``TRANSFER``)."""
+    return named_list(tree, "TRANSFER") or []
+
+
+def exercise_names(tree: ast.Module) -> list[str]:
+    """Every graded function of the module: its ``EXERCISES`` and then its ``TRANSFER`` task."""
+    names = named_list(tree, "EXERCISES")
+    if names is None:
+        raise ValueError("a solution module needs an EXERCISES list")
+    return names + transfer_names(tree)
 
 
 def make_stub_module(source: str, name: str) -> str:

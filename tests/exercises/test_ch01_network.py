@@ -198,3 +198,72 @@ def test_adam_leaves_its_inputs_unchanged(student, rng):
     new_params, new_m, new_v = call_checking_inputs(student.adam_step, "adam_step", params, grads, m, v, 4)
     for value, what in [(new_params, "new_params"), (new_m, "new_m"), (new_v, "new_v")]:
         check_array(value, "adam_step", (2, 3), what)
+
+
+# the transfer task: layer normalisation's backward pass
+
+
+def layer_norm_forward(x, gain):
+    centred = x - x.mean(axis=1, keepdims=True)
+    return gain * centred / np.sqrt((centred * centred).mean(axis=1, keepdims=True) + 1e-5)
+
+
+@pytest.fixture
+def layer_norm_case(rng):
+    return rng.normal(0.5, 2.0, (5, 4)), rng.uniform(0.5, 2.0, 4), rng.standard_normal((5, 4))
+
+
+def test_layer_norm_backward_gain_gradient_sums_over_the_batch(student, layer_norm_case):
+    x, gain, grad_y = layer_norm_case
+    result = _harness.call_checking_inputs(student.layer_norm_backward, "layer_norm_backward", x, gain, grad_y)
+    assert isinstance(result, tuple) and len(result) == 2, "layer_norm_backward should return (grad_x, grad_gain)"
+    grad_gain = _harness.check_array(result[1], "layer_norm_backward", (4,), "grad_gain")
+    g = gain.copy()
+    expected = _harness.numerical_gradient(lambda: float(np.sum(grad_y * layer_norm_forward(x, g))), g, 1e-6)
+    _harness.check_close(
+        grad_gain, expected, "layer_norm_backward", "∂L/∂gain (the gain scales every row: it sums over the batch)",
+        rtol=1e-5, atol=1e-7, n=5,
+    )  # fmt: skip
+
+
+def test_layer_norm_backward_rows_of_grad_x_sum_to_zero(student, layer_norm_case):
+    # adding a constant to a row of x leaves y unchanged, so each row of ∂L/∂x sums to 0
+    x, gain, grad_y = layer_norm_case
+    grad_x = _harness.check_array(
+        student.layer_norm_backward(x, gain, grad_y)[0], "layer_norm_backward", (5, 4), "grad_x"
+    )
+    sums = grad_x.sum(axis=1)
+    worst = int(np.argmax(np.abs(sums)))
+    assert np.all(np.abs(sums) < 1e-8), (
+        f"layer_norm_backward: row {worst} of ∂L/∂x sums to {sums[worst]:.6g}, not 0 (adding a constant to a row of x "
+        "leaves the layer's output unchanged, so the gradient can have no component along (1, …, 1)): the row's mean "
+        "treated as a constant, though it depends on every entry of the row?"
+    )
+
+
+def test_layer_norm_backward_matches_finite_differences(student, layer_norm_case):
+    x, gain, grad_y = layer_norm_case
+    grad_x = _harness.check_array(
+        student.layer_norm_backward(x, gain, grad_y)[0], "layer_norm_backward", (5, 4), "grad_x"
+    )
+    xx = x.copy()
+    expected = _harness.numerical_gradient(lambda: float(np.sum(grad_y * layer_norm_forward(xx, gain))), xx, 1e-6)
+    centred = x - x.mean(axis=1, keepdims=True)
+    inv_std = 1.0 / np.sqrt((centred * centred).mean(axis=1, keepdims=True) + 1e-5)
+    g = grad_y * gain
+    variance_constant = inv_std * (g - g.mean(axis=1, keepdims=True))
+    x_hat = centred * inv_std
+    without_gain = inv_std * (
+        grad_y - grad_y.mean(axis=1, keepdims=True) - x_hat * (grad_y * x_hat).mean(axis=1, keepdims=True)
+    )
+    if np.allclose(grad_x, without_gain, rtol=1e-6, atol=1e-9):
+        raise AssertionError(
+            "layer_norm_backward: ∂L/∂x is what it would be with every gain 1: ∂L/∂y carried back without the gain's "
+            "factor (y = gain · x̂)?"
+        )
+    if np.allclose(grad_x, variance_constant, rtol=1e-6, atol=1e-9) and not np.allclose(grad_x, expected, 1e-5, 1e-7):
+        raise AssertionError(
+            "layer_norm_backward: ∂L/∂x is (g − mean g)/σ row by row, with g = ∂L/∂y · gain: the variance treated as a "
+            "constant, though it depends on every entry of the row too?"
+        )
+    _harness.check_close(grad_x, expected, "layer_norm_backward", "∂L/∂x (checked by finite differences)", 1e-5, 1e-7)

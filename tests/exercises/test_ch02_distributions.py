@@ -262,3 +262,77 @@ def test_gaussian_entropy_backward_matches_finite_differences(student, rng):
 
     check_close(grad_mean, np.zeros((4, 2)), "gaussian_entropy_backward", "∂L/∂μ (the entropy does not depend on μ)")
     check_close(grad_log_std, numerical_gradient(loss, log_std), "gaussian_entropy_backward", "∂L/∂ log σ", n=4)
+
+
+# the transfer task: a categorical with a temperature
+
+
+@pytest.fixture
+def tempered_case(rng):
+    return rng.normal(0.0, 2.0, (6, 4)), rng.integers(0, 4, 6)
+
+
+def test_tempered_categorical_at_temperature_one_is_the_categorical(student, tempered_case):
+    logits, actions = tempered_case
+    result = _harness.call_checking_inputs(
+        student.tempered_categorical_log_prob, "tempered_categorical_log_prob", logits, 1.0, actions
+    )
+    assert isinstance(result, tuple) and len(result) == 3, (
+        "tempered_categorical_log_prob should return (logp, grad_logits, grad_temperature)"
+    )
+    logp = _harness.check_array(result[0], "tempered_categorical_log_prob", (6,), "logp")
+    log_probs = logits - np.log(np.exp(logits).sum(axis=1, keepdims=True))
+    _harness.check_close(logp, log_probs[np.arange(6), actions], "tempered_categorical_log_prob", "logp at τ = 1")
+    grad_logits = _harness.check_array(result[1], "tempered_categorical_log_prob", (6, 4), "grad_logits")
+    score = -np.exp(log_probs)
+    score[np.arange(6), actions] += 1.0
+    _harness.check_close(grad_logits, score, "tempered_categorical_log_prob", "∂ log π/∂z at τ = 1 (chapter 2's score)")
+
+
+def test_tempered_categorical_at_extreme_logits(student, rng):
+    logits = np.array([[1000.0, -1000.0, 0.0]])
+    logp, grad_logits, grad_temperature = student.tempered_categorical_log_prob(logits, 0.5, np.array([1]))
+    _harness.check_array(logp, "tempered_categorical_log_prob", (1,), "logp for logits of ±1000 and τ = 0.5")
+    _harness.check_close(logp, [-4000.0], "tempered_categorical_log_prob", "logp for logits of ±1000 and τ = 0.5")
+    _harness.check_array(grad_logits, "tempered_categorical_log_prob", (1, 3), "grad_logits for logits of ±1000")
+    _harness.check_array(grad_temperature, "tempered_categorical_log_prob", (1,), "grad_temperature, logits of ±1000")
+
+
+@pytest.mark.parametrize("temperature", [0.5, 2.0])
+def test_tempered_categorical_matches_finite_differences(student, tempered_case, temperature):
+    logits, actions = tempered_case
+    logp, grad_logits, grad_temperature = student.tempered_categorical_log_prob(logits, temperature, actions)
+    name = "tempered_categorical_log_prob"
+    _harness.check_array(grad_logits, name, (6, 4), "grad_logits")
+    _harness.check_array(grad_temperature, name, (6,), "grad_temperature")
+
+    def log_prob(z, tau):
+        scaled = z / tau
+        return (scaled - np.log(np.exp(scaled).sum(axis=1, keepdims=True)))[np.arange(6), actions]
+
+    z = logits.copy()
+    numeric = np.zeros((6, 4))
+    for row in range(6):
+        numeric[row] = _harness.numerical_gradient(lambda row=row: float(log_prob(z, temperature)[row]), z[row], 1e-6)
+    _harness.check_close(
+        grad_logits, numeric, name, f"∂ log π/∂z at τ = {temperature} (checked by finite differences)", 1e-5, 1e-7
+    )
+    tau = np.array([temperature])
+    numeric_tau = np.array(
+        [
+            _harness.numerical_gradient(lambda row=row: float(log_prob(logits, tau[0])[row]), tau, 1e-6)[0]
+            for row in range(6)
+        ]
+    )
+    where = {"τ": temperature}
+    if np.allclose(grad_temperature, -numeric_tau, rtol=1e-5, atol=1e-7):
+        raise AssertionError(f"{name}: ∂ log π/∂τ has the opposite sign everywhere (τ divides the logits)")
+    if np.allclose(grad_temperature, -logits[np.arange(6), actions] / temperature**2, rtol=1e-6, atol=1e-9):
+        raise AssertionError(
+            f"{name}: ∂ log π/∂τ at τ = {temperature} is −z_a/τ², the derivative of the chosen logit's term alone: the "
+            "normaliser log Σ exp(z/τ) depends on τ too?"
+        )
+    _harness.check_close(
+        grad_temperature, numeric_tau, name, f"∂ log π/∂τ at τ = {temperature} (checked by finite differences)",
+        1e-5, 1e-7, where=where,
+    )  # fmt: skip

@@ -88,3 +88,62 @@ def test_normalize_advantages_edge_cases(student):
     equal = student.normalize_advantages(np.full(5, 3.0))
     check_array(equal, "normalize_advantages", (5,), "the result for equal advantages (no NaN: add 1e-8 to std)")
     check_close(equal, np.zeros(5), "normalize_advantages", "equal advantages (they should become zeros)")
+
+
+# the transfer task: the policy gradient of a linear softmax policy, in its parameters
+
+
+@pytest.fixture
+def linear_policy_case(rng):
+    return rng.standard_normal((7, 3)), rng.normal(0, 0.8, (3, 4)), rng.integers(0, 4, 7), rng.standard_normal(7)
+
+
+def test_linear_softmax_policy_gradient_with_one_sample(student):
+    features, theta = np.array([[1.0, 2.0]]), np.zeros((2, 2))
+    result = _harness.call_checking_inputs(
+        student.linear_softmax_policy_gradient, "linear_softmax_policy_gradient", features, theta, np.array([0]),
+        np.array([1.0]),
+    )  # fmt: skip
+    assert isinstance(result, tuple) and len(result) == 2, "linear_softmax_policy_gradient should return (value, grad)"
+    _harness.expect_number(
+        result[0], np.log(0.5), "linear_softmax_policy_gradient", "L^PG for one sample, θ = 0, two actions, Â = 1",
+        "log π(a|s) Â with π uniform",
+    )  # fmt: skip
+    grad = _harness.check_array(result[1], "linear_softmax_policy_gradient", (2, 2), "the gradient")
+    # ∂ log π(0|s)/∂θ[:, j] = s (1[j = 0] − ½)
+    expected = np.array([[0.5, -0.5], [1.0, -1.0]])
+    mistakes = {
+        "the score without its −π term, as if log π(a|s) were s θ[:, a]": np.array([[1.0, 0.0], [2.0, 0.0]]),
+        "the gradient of π instead of log π": expected * 0.5,
+        "the outer product taken as (score Â)ᵀ x, the transpose of the (d, k) gradient": np.array(
+            [[0.5, 1.0], [-0.5, -1.0]]
+        ),
+    }
+    for words, value in mistakes.items():
+        if np.allclose(grad, value):
+            raise AssertionError(
+                f"linear_softmax_policy_gradient: for one sample s = (1, 2), θ = 0, a = 0, Â = 1 the gradient should "
+                f"be {expected.tolist()}, not {grad.tolist()}: {words}?"
+            )
+    _harness.check_close(grad, expected, "linear_softmax_policy_gradient", "the gradient for s = (1, 2), θ = 0, a = 0")
+
+
+def test_linear_softmax_policy_gradient_matches_finite_differences(student, linear_policy_case):
+    features, theta, actions, advantages = linear_policy_case
+    value, grad = student.linear_softmax_policy_gradient(features, theta, actions, advantages)
+    logits = features @ theta
+    log_probs = logits - np.log(np.exp(logits).sum(axis=1, keepdims=True))
+    _harness.check_close(
+        _harness.check_scalar(value, "linear_softmax_policy_gradient"),
+        float(np.mean(log_probs[np.arange(7), actions] * advantages)),
+        "linear_softmax_policy_gradient",
+        "L^PG, the mean of log π(a_t|s_t) Â_t",
+    )
+    _harness.check_array(grad, "linear_softmax_policy_gradient", (3, 4), "the gradient")
+    t = theta.copy()
+    numeric = _harness.numerical_gradient(
+        lambda: float(student.linear_softmax_policy_gradient(features, t, actions, advantages)[0]), t, 1e-6
+    )
+    _harness.check_close(
+        grad, numeric, "linear_softmax_policy_gradient", "∂L^PG/∂θ (finite differences)", 1e-5, 1e-7, n=len(actions)
+    )

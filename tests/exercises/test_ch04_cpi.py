@@ -79,3 +79,63 @@ def test_cpi_objective_with_very_negative_log_probs(student):
     value, grad = student.cpi_objective(np.array([-900.0, -901.0]), np.array([-901.0, -900.0]), np.array([1.0, 2.0]))
     check_close(check_scalar(value, "cpi_objective"), (np.e + 2 / np.e) / 2, "cpi_objective", "the value near −900")
     check_array(grad, "cpi_objective", (2,), "the gradient for log-probabilities near −900")
+
+
+# the transfer task: self-normalised importance weights
+
+
+@pytest.fixture
+def weighted_case(rng):
+    logp_old = rng.normal(-1.0, 0.5, 6)
+    return logp_old + rng.normal(0.0, 0.4, 6), logp_old, rng.standard_normal(6)
+
+
+def test_weighted_cpi_objective_value(student, weighted_case):
+    logp, logp_old, advantages = weighted_case
+    result = _harness.call_checking_inputs(
+        student.weighted_cpi_objective, "weighted_cpi_objective", logp, logp_old, advantages
+    )
+    assert isinstance(result, tuple) and len(result) == 2, "weighted_cpi_objective should return (value, grad)"
+    ratio = np.exp(logp - logp_old)
+    _harness.expect_number(
+        result[0], float(np.sum(ratio * advantages) / np.sum(ratio)), "weighted_cpi_objective", "the value",
+        "Σ r Â / Σ r", alternatives={"L^CPI's mean of r Â": float(np.mean(ratio * advantages))},
+    )  # fmt: skip
+
+
+def test_weighted_cpi_gradient_sums_to_zero(student, weighted_case):
+    # adding the same constant to every log π scales every r_t alike and leaves the value unchanged
+    logp, logp_old, advantages = weighted_case
+    _, grad = student.weighted_cpi_objective(logp, logp_old, advantages)
+    grad = _harness.check_array(grad, "weighted_cpi_objective", (6,), "the gradient")
+    ratio = np.exp(logp - logp_old)
+    value = float(np.sum(ratio * advantages) / ratio.sum())
+    mistakes = {
+        "the denominator Σ r treated as a constant, though every r_t is in it": ratio * advantages / ratio.sum(),
+        "L^CPI's gradient r Â / n, the weights' normalisation forgotten": ratio * advantages / len(ratio),
+        "the quotient rule's second term added instead of subtracted": ratio / ratio.sum() * (advantages + value),
+    }
+    named = "".join(f": {words}?" for words, wrong in mistakes.items() if np.allclose(grad, wrong))
+    assert abs(grad.sum()) < 1e-9, (
+        f"weighted_cpi_objective: the gradient should sum to 0 over the batch (adding one constant to every log π "
+        f"multiplies every r_t alike and leaves Σ r Â / Σ r unchanged), not to {grad.sum():.6g}{named}"
+    )
+
+
+def test_weighted_cpi_objective_matches_finite_differences(student, weighted_case):
+    logp, logp_old, advantages = weighted_case
+    _, grad = student.weighted_cpi_objective(logp, logp_old, advantages)
+    x = logp.copy()
+    numeric = _harness.numerical_gradient(
+        lambda: float(student.weighted_cpi_objective(x, logp_old, advantages)[0]), x, 1e-6
+    )
+    _harness.check_close(grad, numeric, "weighted_cpi_objective", "∂/∂ log π (finite differences)", 1e-5, 1e-8)
+
+
+def test_weighted_cpi_objective_with_very_negative_log_probs(student, weighted_case):
+    logp, logp_old, advantages = weighted_case
+    value, grad = student.weighted_cpi_objective(logp - 800.0, logp_old - 800.0, advantages)
+    expected_value, expected_grad = student.weighted_cpi_objective(logp, logp_old, advantages)
+    name = "weighted_cpi_objective"
+    _harness.check_close(_harness.check_scalar(value, name), expected_value, name, "the value with log π near −800")
+    _harness.check_close(_harness.check_array(grad, name, (6,)), expected_grad, name, "the gradient, log π near −800")

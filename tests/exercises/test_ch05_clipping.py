@@ -60,6 +60,19 @@ def clip(r, low, high):
     return low if r < low else high if r > high else r
 
 
+def gives_the_answer_of_epsilon_02(student, epsilon) -> bool:
+    """Whether clipped_surrogate, called with ``epsilon`` on ratios across the band, returns the values that ε = 0.2
+    gives (and that ``epsilon`` does not): ε written into the code."""
+    ratios, advantages = np.array([0.5, 0.75, 0.85, 1.15, 1.25, 1.5]), np.arange(1.0, 7.0)  # no symmetry to cancel
+    try:
+        value, _ = student.clipped_surrogate(np.log(ratios), np.zeros(6), advantages, epsilon)
+    except Exception:  # noqa: BLE001 - a probe only: the test's own call reports what raised
+        return False
+    at_02 = np.mean(np.clip(ratios, 0.8, 1.2) * advantages)
+    at_epsilon = np.mean(np.clip(ratios, 1 - epsilon, 1 + epsilon) * advantages)
+    return abs(float(value) - at_02) < 1e-9 and abs(at_02 - at_epsilon) > 1e-6
+
+
 @pytest.mark.parametrize("ratio, advantage, epsilon", SINGLE, ids=[f"r={r}-A={a}-eps={e}" for r, a, e in SINGLE])
 def test_clipped_surrogate_one_sample(student, ratio, advantage, epsilon):
     logp_old = np.array([-1.3])
@@ -70,10 +83,18 @@ def test_clipped_surrogate_one_sample(student, ratio, advantage, epsilon):
     inverse = 1 / ratio
     swapped = "r computed as π_old/π (log π and log π_old swapped)"
     fixed = "ε fixed at 0.2 (the epsilon argument ignored)"
+    the_min = "the min's asymmetric value and gradient: that is chapter 6's L^CLIP, not the clipped term alone"
+    helps = (advantage > 0 and ratio <= 1 + epsilon) or (advantage < 0 and ratio >= 1 - epsilon)
+    log_band = abs(np.log(ratio)) < epsilon
+    # ε fixed is named only where the student's code, probed on other ratios, gives ε = 0.2's answer for this ε; the
+    # other mistakes in the order the grader's own wrong variants reach this case: a case that tells two of them apart
+    # comes earlier in SINGLE, so the one still standing here is named first
+    ignores_epsilon = epsilon != 0.2 and gives_the_answer_of_epsilon_02(student, epsilon)
     value_mistakes = {
-        fixed: clip(ratio, 0.8, 1.2) * advantage if epsilon != 0.2 else None,
-        swapped: clip(inverse, 1 - epsilon, 1 + epsilon) * advantage,
+        fixed: clip(ratio, 0.8, 1.2) * advantage if ignores_epsilon else None,
+        the_min: min(ratio * advantage, clip(ratio, 1 - epsilon, 1 + epsilon) * advantage),
         "r Â, the ratio unclipped": ratio * advantage,
+        swapped: clip(inverse, 1 - epsilon, 1 + epsilon) * advantage,
     }
     expected_value = clip(ratio, 1 - epsilon, 1 + epsilon) * advantage
     why = f"clip(r, 1 − ε, 1 + ε) Â, r is {place}"
@@ -82,9 +103,11 @@ def test_clipped_surrogate_one_sample(student, ratio, advantage, epsilon):
     )
     check_array(grad, "clipped_surrogate", (1,), f"the gradient for {sample}")
     grad_mistakes = {
-        fixed: (ratio * advantage if abs(ratio - 1) < 0.2 else 0.0) if epsilon != 0.2 else None,
-        swapped: inverse * advantage if abs(inverse - 1) < epsilon else 0.0,
+        fixed: (ratio * advantage if abs(ratio - 1) < 0.2 else 0.0) if ignores_epsilon else None,
+        "the gradient's band tested on |log r| < ε instead of |r − 1| ≤ ε": ratio * advantage if log_band else 0.0,
+        the_min: ratio * advantage if helps else 0.0,
         "the gradient of the unclipped r Â, as if the clip were not there": None if inside else ratio * advantage,
+        swapped: inverse * advantage if abs(inverse - 1) < epsilon else 0.0,
     }
     why = f"r Â, since r is {place}" if inside else f"clip(r) is a constant there: r is {place}"
     expected_grad = ratio * advantage if inside else 0.0
@@ -97,9 +120,9 @@ def test_clipped_surrogate_one_sample(student, ratio, advantage, epsilon):
 def test_clip_fraction_of_one_sample(student, ratio, epsilon):
     fraction = check_scalar(student.clip_fraction(np.log([ratio]), np.zeros(1), epsilon), "clip_fraction")
     expected = float(abs(ratio - 1) > epsilon)
-    mistakes = {
-        "r computed as π_old/π (log π and log π_old swapped)": float(abs(1 / ratio - 1) > epsilon),
+    mistakes = {  # the window cases that tell these two apart come first; r = 0.83 is there for the swap alone
         "a band on |log r|": float(abs(np.log(ratio)) > epsilon),
+        "r computed as π_old/π (log π and log π_old swapped)": float(abs(1 / ratio - 1) > epsilon),
     }
     named = [words for words, value in mistakes.items() if value == fraction]
     assert fraction == expected, (
@@ -144,6 +167,23 @@ def test_clip_fraction_at_the_edges_of_the_band(student):
         f"outside; r = 1.25 and 0.75 lie exactly on the edges, |r − 1| = ε, which is not > ε), not {fraction:.6g}"
         + (": |r − 1| ≥ ε where the contract says > ε?" if fraction == 0.75 else "")
     )
+
+
+def test_clipped_surrogate_on_the_edges_of_the_band(student):
+    # ε = 0.25 and r = 1.25 or 0.75 exactly: the contract's band is closed, so a ratio on an edge is inside it and
+    # keeps its gradient r Â / n (the derivative does not exist there; the contract picks this side, as clip_fraction
+    # does when it does not count such a ratio)
+    logp = np.array([exact_log_ratio(1.25), exact_log_ratio(0.75)])
+    advantages = np.array([1.0, -1.0])
+    _, grad = student.clipped_surrogate(logp, np.zeros(2), advantages, 0.25)
+    check_array(grad, "clipped_surrogate", (2,), "the gradient")
+    expected = np.array([1.25, -0.75]) / 2
+    what = "the gradient for r = 1.25 and 0.75, exactly on the edges of the band (ε = 0.25, Â = 1 and −1)"
+    assert not np.all(grad == 0), (
+        f"clipped_surrogate: {what} should be r Â / n = {expected.tolist()} (the band is closed: |r − 1| = ε is "
+        f"inside), not {grad.tolist()}: the open band 1 − ε < r < 1 + ε where the contract says ≤?"
+    )
+    check_close(grad, expected, "clipped_surrogate", f"{what}, r Â / n")
 
 
 @pytest.fixture
@@ -205,3 +245,66 @@ def test_clip_fraction_counts_ratios_outside_the_band(student, batch):
             "clip_fraction",
             f"the fraction outside the band for ε = {epsilon} ({count} of {len(RATIOS)} ratios: {RATIOS.tolist()})",
         )
+
+
+# the transfer task: dual-clip PPO's lower bound for negative advantages
+
+DUAL = [  # (r, Â): the bound c = 3 binds for Â < 0 and r > 3 only
+    (0.5, 1.0), (1.1, 1.0), (1.5, 1.0), (4.0, 1.0),
+    (0.5, -1.0), (1.1, -1.0), (2.0, -1.0), (4.0, -1.0), (6.0, -2.0),
+]  # fmt: skip
+
+
+def dual_clip_term(r, a, epsilon=0.2, c=3.0):
+    term = min(r * a, clip(r, 1 - epsilon, 1 + epsilon) * a)
+    return max(term, c * a) if a < 0 else term
+
+
+@pytest.mark.parametrize("ratio, advantage", DUAL, ids=[f"r={r}-A={a}" for r, a in DUAL])
+def test_dual_clip_surrogate_one_sample(student, ratio, advantage):
+    logp_old = np.array([-1.1])
+    result = _harness.call_checking_inputs(
+        student.dual_clip_surrogate, "dual_clip_surrogate", np.log([ratio]) + logp_old, logp_old,
+        np.array([advantage]), 0.2, 3.0,
+    )  # fmt: skip
+    assert isinstance(result, tuple) and len(result) == 2, "dual_clip_surrogate should return (value, grad)"
+    value, grad = result
+    sample = f"one sample with r = {ratio}, Â = {advantage}, ε = 0.2, c = 3"
+    clip_term = min(ratio * advantage, clip(ratio, 0.8, 1.2) * advantage)
+    expected = dual_clip_term(ratio, advantage)
+    bound_everywhere = max(clip_term, 3.0 * advantage)
+    expect_number(
+        value, expected, "dual_clip_surrogate", f"the value for {sample}", alternatives={
+            "L^CLIP's term without the bound c Â (the bound binds for Â < 0 and r > c)": clip_term,
+            "the bound c Â applied to a positive advantage too": bound_everywhere,
+            "min(·, c Â) where the bound is a max, a floor for Â < 0": min(clip_term, 3.0 * advantage),
+        },
+    )  # fmt: skip
+    bound_binds = advantage < 0 and ratio > 3.0
+    helps = (advantage > 0 and ratio <= 1.2) or (advantage < 0 and ratio >= 0.8)
+    expected_grad = 0.0 if bound_binds or not helps else ratio * advantage
+    expect_number(
+        check_array(grad, "dual_clip_surrogate", (1,), f"the gradient for {sample}"), expected_grad,
+        "dual_clip_surrogate", f"the gradient for {sample}", alternatives={
+            "L^CLIP's gradient where the bound c Â binds (c Â is a constant there)": ratio * advantage
+            if bound_binds else None,
+        },
+    )  # fmt: skip
+
+
+def test_dual_clip_surrogate_matches_finite_differences(student, rng):
+    ratios = np.array([0.4, 0.7, 0.9, 1.1, 1.3, 2.0, 2.6, 3.4, 5.0, 0.5, 0.95, 1.5, 2.9, 3.3, 4.5, 8.0])
+    advantages = np.where(np.arange(len(ratios)) < 9, -1.0, 1.0) * rng.uniform(0.3, 2.0, len(ratios))
+    logp_old = rng.normal(-1.0, 0.5, len(ratios))
+    logp = np.log(ratios) + logp_old
+    value, grad = student.dual_clip_surrogate(logp, logp_old, advantages, 0.2, 3.0)
+    expected = np.mean([dual_clip_term(r, a) for r, a in zip(ratios, advantages)])
+    check_close(check_scalar(value, "dual_clip_surrogate"), expected, "dual_clip_surrogate", "the value (c = 3)")
+    check_array(grad, "dual_clip_surrogate", (len(ratios),), "the gradient")
+    numeric = numerical_gradient(
+        lambda: float(student.dual_clip_surrogate(logp, logp_old, advantages, 0.2, 3.0)[0]), logp, 1e-7
+    )
+    check_close(
+        grad, numeric, "dual_clip_surrogate", "∂/∂ log π (finite differences), ε = 0.2, c = 3",
+        where=lambda i: f"r_t = {ratios[i]}, Â_t = {advantages[i]:.4g}",
+    )  # fmt: skip

@@ -392,3 +392,97 @@ def test_gae_for_several_environments(student, rng):
             f"Â of environment {i} in a (T, N) batch",
             where=describe_step(stacked[3][:, i], stacked[4][:, i]),
         )
+
+
+# the transfer task: GAE with a discount per step
+
+
+def gae_step_discounts_by_definition(rewards, values, next_values, terminated, truncated, gammas, lam):
+    """Â_t as the sum it stands for: Σ_l (∏ of the factors γ_j λ between t and t + l) δ_{t+l}, to the episode's end."""
+    T = len(rewards)
+    deltas = rewards + gammas * np.where(terminated, 0.0, next_values) - values
+    result = np.zeros(T)
+    for t in range(T):
+        weight, s = 1.0, t
+        while True:
+            result[t] += weight * deltas[s]
+            if terminated[s] or truncated[s] or s == T - 1:
+                break
+            weight *= gammas[s] * lam
+            s += 1
+    return result
+
+
+@pytest.fixture
+def step_discount_case(rng):
+    T = 12
+    terminated, truncated = np.zeros(T, bool), np.zeros(T, bool)
+    terminated[4], truncated[8] = True, True
+    return (rng.standard_normal(T), rng.standard_normal(T), rng.standard_normal(T), terminated, truncated,
+            rng.uniform(0.5, 0.99, T))  # fmt: skip
+
+
+def test_gae_with_step_discounts_of_two_steps(student):
+    # Â_0 = δ_0 + γ_0 λ δ_1: the factor between steps 0 and 1 is γ_0, the discount of what follows step 0
+    rewards, values, next_values = np.array([1.0, 0.0]), np.array([0.0, 0.0]), np.array([0.0, 1.0])
+    flags = np.zeros(2, bool)
+    gammas = np.array([0.5, 0.9])
+    result = _harness.call_checking_inputs(
+        student.gae_with_step_discounts, "gae_with_step_discounts", rewards, values, next_values, flags, flags.copy(),
+        gammas, 1.0,
+    )  # fmt: skip
+    result = check_array(result, "gae_with_step_discounts", (2,), "Â")
+    # δ_0 = 1, δ_1 = 0.9; Â_1 = 0.9, Â_0 = 1 + 0.5 · 0.9
+    expected = [1.45, 0.9]
+    if np.allclose(result, [1.81, 0.9]):
+        raise AssertionError(
+            "gae_with_step_discounts: for two steps with r = (1, 0), V = 0, next_values = (0, 1), γ = (0.5, 0.9), "
+            "λ = 1, Â_0 should be 1.45 = δ_0 + γ_0 λ Â_1, not 1.81: the carry discounted by γ_{t+1}, the next step's "
+            "own discount, where γ_t discounts what follows step t?"
+        )
+    mistakes = {
+        "one γ for the whole batch (the mean of the gammas), where each step has its own": [1.49, 0.7],
+        "δ_t bootstrapped without its γ_t: γ_t discounts V(s_{t+1}) in δ_t too": [1.5, 1.0],
+    }
+    for words, wrong in mistakes.items():
+        if np.allclose(result, wrong):
+            raise AssertionError(
+                f"gae_with_step_discounts: for two steps with r = (1, 0), V = 0, next_values = (0, 1), γ = (0.5, 0.9), "
+                f"λ = 1, Â should be {expected}, not {result.tolist()}: {words}?"
+            )
+    check_close(result, expected, "gae_with_step_discounts", "Â for r = (1, 0), next_values = (0, 1), γ = (0.5, 0.9)")
+
+
+def test_gae_with_equal_step_discounts_is_gae(student, step_discount_case):
+    rewards, values, next_values, terminated, truncated, _ = step_discount_case
+    result = student.gae_with_step_discounts(rewards, values, next_values, terminated, truncated, np.full(12, 0.9), 0.8)
+    from minippo.advantages import gae
+
+    expected = gae(rewards, values, next_values, terminated, truncated, 0.9, 0.8)
+    deltas = rewards + 0.9 * np.where(terminated, 0.0, next_values) - values
+    across = np.zeros(12)
+    for t in range(11, -1, -1):
+        across[t] = deltas[t] + (0.9 * 0.8 * across[t + 1] if t < 11 else 0.0)
+    if np.allclose(result, across):
+        raise AssertionError(
+            "gae_with_step_discounts: with every γ_t = 0.9, Â differs from chapter 7's gae before the episode ends at "
+            "steps 4 (terminated) and 8 (truncated): the carry not stopped at an episode's end?"
+        )
+    check_close(
+        check_array(result, "gae_with_step_discounts", (12,), "Â"),
+        expected,
+        "gae_with_step_discounts",
+        "Â with every γ_t = 0.9 (chapter 7's gae)",
+        where={"terminated": terminated, "truncated": truncated},
+    )
+
+
+def test_gae_with_step_discounts_matches_the_sum(student, step_discount_case):
+    rewards, values, next_values, terminated, truncated, gammas = step_discount_case
+    result = student.gae_with_step_discounts(rewards, values, next_values, terminated, truncated, gammas, 0.8)
+    expected = gae_step_discounts_by_definition(rewards, values, next_values, terminated, truncated, gammas, 0.8)
+    check_close(
+        check_array(result, "gae_with_step_discounts", (12,), "Â"), expected, "gae_with_step_discounts",
+        "Â against the sum of discounted TD residuals, with a different γ_t at every step",
+        where={"γ_t": gammas, "terminated": terminated, "truncated": truncated},
+    )  # fmt: skip

@@ -19,34 +19,10 @@ VALUE_CASES = [
     (0.5, 0.0, 1.0, 0.2, "V moved 0.5 > ε toward the target: the clipped error is larger, and V^clip is flat there"),
     (0.1, 0.0, 1.0, 0.2, "V moved 0.1 < ε: V^clip = V, the two errors are equal"),
     (2.0, 1.0, 0.0, 0.4, "V moved 1 > ε away from the target: the unclipped error is larger"),
+    # V outside [−ε, ε] with the target elsewhere than 0: clipping V itself and clipping V − V^targ part ways here
+    (0.3, 1.0, 0.9, 0.1, "V moved 0.7 > ε, past the target: the unclipped error is larger"),
     (0.3, 1.0, 0.0, 0.4, "V moved 0.7 > ε toward the target: the clipped error is larger, and V^clip is flat there"),
 ]
-
-
-@pytest.mark.parametrize("v, v_old, target, epsilon, case", VALUE_CASES, ids=[str(i) for i in range(len(VALUE_CASES))])
-def test_clipped_value_loss_one_sample(student, v, v_old, target, epsilon, case):
-    loss, grad = student.clipped_value_loss(np.array([v]), np.array([target]), np.array([v_old]), epsilon)
-    clipped = v_old + min(max(v - v_old, -epsilon), epsilon)
-    error, clipped_error = v - target, clipped - target
-    sample = f"one sample with V = {v}, V_old = {v_old}, V^targ = {target}, ε = {epsilon}"
-    expected_loss = 0.5 * max(error**2, clipped_error**2)
-    loss_mistakes = {
-        "the smaller of the two errors (min): the clipped loss is pessimistic, it takes the max": 0.5
-        * min(error**2, clipped_error**2),
-        "ε fixed at 0.2 (the epsilon argument ignored)": None
-        if epsilon == 0.2
-        else 0.5 * max(error**2, (v_old + min(max(v - v_old, -0.2), 0.2) - target) ** 2),
-        "the plain loss ½ (V − V^targ)², as if nothing were clipped: is V clipped around V^targ instead of around "
-        "V_old (V^clip = V_old + clip(V − V_old, −ε, ε))": 0.5 * error**2,
-    }
-    expect_number(loss, expected_loss, "clipped_value_loss", f"the loss for {sample}", case, alternatives=loss_mistakes)
-    check_array(grad, "clipped_value_loss", (1,), f"the gradient for {sample}")
-    use_clipped = clipped_error**2 > error**2
-    expected_grad = 0.0 if use_clipped else error
-    grad_mistakes = {"the clipped branch's error passed on outside the band, where V^clip is a constant": clipped_error}
-    expect_number(
-        grad, expected_grad, "clipped_value_loss", f"the gradient for {sample}", case, alternatives=grad_mistakes
-    )
 
 
 @pytest.mark.parametrize("n", [1, 7])
@@ -58,6 +34,35 @@ def test_value_loss_value_and_gradient(student, rng, n):
     check_array(grad, "value_loss", (n,), "the gradient")
     numeric = numerical_gradient(lambda: float(student.value_loss(values, targets)[0]), values)
     check_close(grad, numeric, "value_loss", "∂L^VF/∂V (checked by finite differences; it should be (V − V^targ)/n)")
+
+
+@pytest.mark.parametrize("v, v_old, target, epsilon, case", VALUE_CASES, ids=[str(i) for i in range(len(VALUE_CASES))])
+def test_clipped_value_loss_one_sample(student, v, v_old, target, epsilon, case):
+    loss, grad = student.clipped_value_loss(np.array([v]), np.array([target]), np.array([v_old]), epsilon)
+    clipped = v_old + min(max(v - v_old, -epsilon), epsilon)
+    error, clipped_error = v - target, clipped - target
+    sample = f"one sample with V = {v}, V_old = {v_old}, V^targ = {target}, ε = {epsilon}"
+    expected_loss = 0.5 * max(error**2, clipped_error**2)
+    loss_mistakes = {  # the mistakes computed exactly first; the min, which the plain loss also gives here, after
+        "V clipped around V^targ instead of around V_old (V^clip = V_old + clip(V − V_old, −ε, ε))": 0.5
+        * max(error**2, min(max(error, -epsilon), epsilon) ** 2),
+        "V itself clipped to [−ε, ε] instead of its change V − V_old": 0.5
+        * max(error**2, (min(max(v, -epsilon), epsilon) - target) ** 2),
+        "the smaller of the two errors (min): the clipped loss is pessimistic, it takes the max": 0.5
+        * min(error**2, clipped_error**2),
+        "ε fixed at 0.2 (the epsilon argument ignored)": None
+        if epsilon == 0.2
+        else 0.5 * max(error**2, (v_old + min(max(v - v_old, -0.2), 0.2) - target) ** 2),
+        "the plain loss ½ (V − V^targ)², as if nothing were clipped": 0.5 * error**2,
+    }
+    expect_number(loss, expected_loss, "clipped_value_loss", f"the loss for {sample}", case, alternatives=loss_mistakes)
+    check_array(grad, "clipped_value_loss", (1,), f"the gradient for {sample}")
+    use_clipped = clipped_error**2 > error**2
+    expected_grad = 0.0 if use_clipped else error
+    grad_mistakes = {"the clipped branch's error passed on outside the band, where V^clip is a constant": clipped_error}
+    expect_number(
+        grad, expected_grad, "clipped_value_loss", f"the gradient for {sample}", case, alternatives=grad_mistakes
+    )
 
 
 def reference_clipped_value_loss(values, targets, values_old, epsilon):
@@ -200,3 +205,50 @@ def test_clip_vf_s_objective_value_and_gradients(student, objective_batch, c1, c
             "clip_vf_s_objective",
             f"{what} (checked by finite differences, c1 = {c1}, c2 = {c2}, ε = {epsilon})",
         )
+
+
+# the transfer task: the Huber value loss
+
+
+def test_huber_value_loss_of_single_errors(student):
+    # δ = 1: errors 0.5 (quadratic part), 3 and −3 (linear part)
+    for error, loss, slope in [(0.5, 0.125, 0.5), (3.0, 2.5, 1.0), (-3.0, 2.5, -1.0)]:
+        result = _harness.call_checking_inputs(
+            student.huber_value_loss, "huber_value_loss", np.array([error]), np.array([0.0]), 1.0
+        )
+        assert isinstance(result, tuple) and len(result) == 2, "huber_value_loss should return (loss, grad)"
+        expect_number(
+            result[0], loss, "huber_value_loss", f"the loss for one error e = {error} with δ = 1",
+            alternatives={"δ |e| without the −½δ² that joins the line to the parabola": abs(error),
+                          "½ e², the squared error everywhere": 0.5 * error * error},
+        )  # fmt: skip
+        expect_number(
+            check_array(result[1], "huber_value_loss", (1,), "the gradient")[0], slope, "huber_value_loss",
+            f"the gradient for one error e = {error} with δ = 1",
+            alternatives={"the squared error's gradient e, unclipped": error if abs(error) > 1 else None},
+        )  # fmt: skip
+
+
+def test_huber_value_loss_matches_finite_differences(student, rng):
+    values, targets = rng.normal(0.0, 3.0, 9), rng.normal(0.0, 1.0, 9)
+    loss, grad = student.huber_value_loss(values, targets, 1.5)
+    error = values - targets
+    expected = np.mean(np.where(np.abs(error) <= 1.5, 0.5 * error**2, 1.5 * (np.abs(error) - 0.75)))
+    check_close(check_scalar(loss, "huber_value_loss"), expected, "huber_value_loss", "the mean Huber loss, δ = 1.5")
+    v = values.copy()
+    numeric = numerical_gradient(lambda: float(student.huber_value_loss(v, targets, 1.5)[0]), v, 1e-6)
+    sign_only = np.where(np.abs(error) <= 1.5, error, np.sign(error)) / 9
+    if np.allclose(grad, sign_only) and not np.allclose(sign_only, numeric):
+        raise AssertionError(
+            "huber_value_loss: beyond δ = 1.5 the gradient is sign(e) / n, without the line's slope δ: the linear "
+            "part is δ (|e| − ½ δ), whose derivative is δ sign(e)?"
+        )
+    check_close(
+        check_array(grad, "huber_value_loss", (9,), "the gradient"),
+        numeric,
+        "huber_value_loss",
+        "∂loss/∂V (finite differences), δ = 1.5",
+        1e-5,
+        1e-8,
+        where={"e_t": error},
+    )

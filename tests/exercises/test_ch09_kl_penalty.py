@@ -166,3 +166,82 @@ def test_adaptive_beta_scales_the_current_beta(student):
         assert new == pytest.approx(expected), (
             f"adaptive_beta: with β = {beta}, d = {kl} and d_targ = 0.01, the new β should be {expected}, not {new:.6g}"
         )
+
+
+# the transfer task: the reverse KL, KL[π ‖ π_old], and its gradient
+
+
+def test_reverse_kl_of_two_actions(student):
+    # π_old = (½, ½), π = softmax(log 3, 0) = (¾, ¼): KL[π ‖ π_old] = ¾ log(3/2) + ¼ log(1/2)
+    logits_old, logits = np.zeros((1, 2)), np.array([[np.log(3.0), 0.0]])
+    result = _harness.call_checking_inputs(
+        student.reverse_kl_backward, "reverse_kl_backward", logits_old, logits, np.ones(1)
+    )
+    assert isinstance(result, tuple) and len(result) == 2, "reverse_kl_backward should return (kl, grad_logits)"
+    kl = check_array(result[0], "reverse_kl_backward", (1,), "the KL")
+    expected = 0.75 * np.log(1.5) + 0.25 * np.log(0.5)
+    forward = 0.5 * np.log(0.5 / 0.75) + 0.5 * np.log(0.5 / 0.25)
+    expect_number(
+        kl,
+        expected,
+        "reverse_kl_backward",
+        "KL[π ‖ π_old] for π = (¾, ¼), π_old = (½, ½)",
+        alternatives={"KL[π_old ‖ π], chapter 9's order (the old policy first)": forward},
+    )
+    grad = check_array(result[1], "reverse_kl_backward", (1, 2), "the gradient")
+    forward_grad = np.array([[0.25, -0.25]])  # π − π_old: the forward KL's gradient
+    if np.allclose(grad, forward_grad):
+        raise AssertionError(
+            "reverse_kl_backward: for π = (¾, ¼), π_old = (½, ½) the gradient is π − π_old, which is chapter 9's "
+            "gradient of KL[π_old ‖ π], not of KL[π ‖ π_old]?"
+        )
+    gap = np.log([1.5, 0.5])
+    missing_kl = np.array([[0.75, 0.25]]) * gap
+    if np.allclose(grad, missing_kl):
+        raise AssertionError(
+            "reverse_kl_backward: the gradient is π_j (log π_j − log π_old,j) without subtracting KL: the dependence "
+            "of the softmax's normaliser on every logit forgotten?"
+        )
+    check_close(
+        grad,
+        np.array([[0.75, 0.25]]) * (gap - expected),
+        "reverse_kl_backward",
+        "∂KL/∂z for π = (¾, ¼), π_old = (½, ½)",
+    )
+
+
+def test_reverse_kl_backward_matches_finite_differences(student, rng):
+    logits_old, logits, upstream = rng.normal(0, 1.5, (5, 4)), rng.normal(0, 1.5, (5, 4)), rng.standard_normal(5)
+    kl, grad = student.reverse_kl_backward(logits_old, logits, upstream)
+    log_old = logits_old - np.log(np.exp(logits_old).sum(axis=1, keepdims=True))
+    log_new = logits - np.log(np.exp(logits).sum(axis=1, keepdims=True))
+    check_close(
+        check_array(kl, "reverse_kl_backward", (5,), "the KL"),
+        (np.exp(log_new) * (log_new - log_old)).sum(1),
+        "reverse_kl_backward",
+        "KL[π ‖ π_old] per row",
+    )
+    z = logits.copy()
+    numeric = numerical_gradient(
+        lambda: float(np.sum(upstream * student.reverse_kl_backward(logits_old, z, upstream)[0])), z, 1e-6
+    )
+    check_close(
+        check_array(grad, "reverse_kl_backward", (5, 4), "the gradient"),
+        numeric,
+        "reverse_kl_backward",
+        "∂L/∂z (finite differences of Σ ∂L/∂KL · KL)",
+        1e-5,
+        1e-8,
+    )
+
+
+def test_reverse_kl_survives_extreme_logits(student):
+    logits_old, logits = np.array([[1000.0, -1000.0, 0.0]]), np.array([[-1000.0, 1000.0, 0.0]])
+    kl, grad = student.reverse_kl_backward(logits_old, logits, np.ones(1))
+    check_close(
+        check_array(kl, "reverse_kl_backward", (1,), "the KL for logits of ±1000"),
+        [2000.0],
+        "reverse_kl_backward",
+        "the KL for logits of ±1000 (use log-softmax, not the log of a softmax)",
+    )
+    check_array(grad, "reverse_kl_backward", (1, 3), "the gradient for logits of ±1000")

@@ -1089,6 +1089,89 @@ LEARN_STEPS = 60_000
 LEARN_THRESHOLD = 150.0
 
 
+# the transfer task: the loss's gradient at the output of a shared trunk
+
+
+@pytest.fixture
+def trunk_case(rng):
+    n, d, k = 8, 5, 3
+    features, policy_weights, value_weights = (
+        rng.standard_normal((n, d)),
+        rng.normal(0, 0.5, (d, k)),
+        rng.standard_normal(d),
+    )
+    actions = rng.integers(0, k, n)
+    logits = features @ policy_weights
+    log_probs = logits - np.log(np.exp(logits).sum(axis=1, keepdims=True))
+    ratios = np.array([0.6, 0.9, 1.0, 1.1, 1.5, 0.7, 1.05, 2.0])  # both sides of the band and inside, off its edges
+    logp_old = log_probs[np.arange(n), actions] - np.log(ratios)
+    return features, policy_weights, value_weights, actions, logp_old, rng.standard_normal(n), rng.standard_normal(n)
+
+
+def trunk_loss(features, policy_weights, value_weights, actions, logp_old, advantages, returns, epsilon, value_coef):
+    logits = features @ policy_weights
+    log_probs = logits - np.log(np.exp(logits).sum(axis=1, keepdims=True))
+    clip_value, _ = losses.clip_objective(log_probs[np.arange(len(actions)), actions], logp_old, advantages, epsilon)
+    values = features @ value_weights
+    return -clip_value + value_coef * 0.5 * float(np.mean((values - returns) ** 2))
+
+
+def test_shared_trunk_gradient_of_the_value_head_alone(student, trunk_case):
+    # with Â = 0 the policy's term is 0 everywhere: what is left is c1 ∂L^VF/∂h, through the value head only
+    features, policy_weights, value_weights, actions, logp_old, _, returns = trunk_case
+    advantages = np.zeros(len(actions))
+    result = call_checking_inputs(
+        student.shared_trunk_gradient, "shared_trunk_gradient", features, policy_weights, value_weights, actions,
+        logp_old, advantages, returns, 0.2, 0.5,
+    )  # fmt: skip
+    assert isinstance(result, tuple) and len(result) == 2, "shared_trunk_gradient should return (loss, grad_features)"
+    grad = check_array(result[1], "shared_trunk_gradient", features.shape, "∂loss/∂h with Â = 0")
+    error = features @ value_weights - returns
+    expected = 0.5 * error[:, None] * value_weights[None, :] / len(actions)
+    mistakes = {
+        "the value term's sign flipped (the loss adds c1 L^VF; the objective subtracts it)": -expected,
+        "the value head's gradient missing: only the policy's path into h": np.zeros(features.shape),
+        "L^VF without its ½ (chapter 8's value loss has it)": 2 * expected,
+    }
+    for words, wrong in mistakes.items():
+        if np.allclose(grad, wrong, rtol=1e-6, atol=1e-12):
+            raise AssertionError(
+                f"shared_trunk_gradient: with Â = 0 the gradient should be c1 (V_t − V^targ_t) w_V / n, row by row, "
+                f"not what it is: {words}?"
+            )
+    check_close(grad, expected, "shared_trunk_gradient", "∂loss/∂h with Â = 0 (the value head's path alone)")
+
+
+def test_shared_trunk_gradient_matches_finite_differences(student, trunk_case):
+    features, policy_weights, value_weights, actions, logp_old, advantages, returns = trunk_case
+    args = (policy_weights, value_weights, actions, logp_old, advantages, returns, 0.2, 0.5)
+    loss, grad = student.shared_trunk_gradient(features, *args)
+    check_close(
+        check_scalar(loss, "shared_trunk_gradient"),
+        trunk_loss(features, *args),
+        "shared_trunk_gradient",
+        "the loss −(L^CLIP − c1 L^VF)",
+    )
+    h = features.copy()
+    numeric = numerical_gradient(lambda: trunk_loss(h, *args), h, 1e-7)
+    policy_only = numeric - 0.5 * ((features @ value_weights - returns)[:, None] * value_weights[None, :]) / len(
+        actions
+    )
+    if np.allclose(grad, policy_only, rtol=1e-5, atol=1e-8):
+        raise AssertionError(
+            "shared_trunk_gradient: ∂loss/∂h holds the policy head's path only: the value head reads the same h, and "
+            "its gradient adds up with the policy's there?"
+        )
+    check_close(
+        check_array(grad, "shared_trunk_gradient", features.shape, "∂loss/∂h"),
+        numeric,
+        "shared_trunk_gradient",
+        "∂loss/∂h (finite differences)",
+        1e-5,
+        1e-8,
+    )
+
+
 @pytest.mark.timeout(150)
 def test_ppo_update_learns_cartpole(student):
     config = Config(**CARTPOLE_PPO, total_steps=LEARN_STEPS, seed=1)

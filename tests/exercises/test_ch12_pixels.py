@@ -320,3 +320,58 @@ def test_conv2d_matches_minippo_at_the_minatar_network_size(student, rng):
     grads = backward_result(student.conv2d_backward(x, K, grad_y), x, K, grad_y)
     for got, expected, name in zip(grads, conv.conv2d_backward(x, K, grad_y), ("grad_x", "grad_K", "grad_b")):
         check_close(got, expected, "conv2d_backward", f"{name} {what}", 1e-9, 1e-12)
+
+
+# the transfer task: max pooling's backward pass
+
+
+def max_pool(x, size):
+    n, H, W, C = x.shape
+    return x.reshape(n, H // size, size, W // size, size, C).max(axis=(2, 4))
+
+
+def test_max_pool2d_backward_of_one_window(student):
+    x = np.array([[1.0, 5.0], [3.0, 2.0]]).reshape(1, 2, 2, 1)
+    grad_y = np.array([7.0]).reshape(1, 1, 1, 1)
+    grad_x = call_checking_inputs(student.max_pool2d_backward, "max_pool2d_backward", x, 2, grad_y)
+    grad_x = check_array(grad_x, "max_pool2d_backward", (1, 2, 2, 1), "∂L/∂x")
+    got = grad_x[0, :, :, 0]
+    mistakes = {
+        "the gradient spread evenly over the window, as an average pool's": np.full((2, 2), 7.0 / 4),
+        "the gradient copied to every pixel of the window": np.full((2, 2), 7.0),
+        "the window read transposed (p and q swapped)": np.array([[0.0, 0.0], [7.0, 0.0]]),
+    }
+    for words, wrong in mistakes.items():
+        if np.allclose(got, wrong):
+            raise AssertionError(
+                f"max_pool2d_backward: for one 2 × 2 window [[1, 5], [3, 2]] with ∂L/∂y = 7 the gradient should be "
+                f"[[0, 7], [0, 0]] (only the maximum, 5, reaches y), not {got.tolist()}: {words}?"
+            )
+    check_close(got, [[0.0, 7.0], [0.0, 0.0]], "max_pool2d_backward", "∂L/∂x for the window [[1, 5], [3, 2]]")
+
+
+def test_max_pool2d_backward_at_a_tie(student):
+    x = np.array([[4.0, 1.0], [4.0, 4.0]]).reshape(1, 2, 2, 1)
+    grad_x = student.max_pool2d_backward(x, 2, np.array([3.0]).reshape(1, 1, 1, 1))
+    got = check_array(grad_x, "max_pool2d_backward", (1, 2, 2, 1), "∂L/∂x at a tie")[0, :, :, 0]
+    assert np.allclose(got, [[3.0, 0.0], [0.0, 0.0]]), (
+        f"max_pool2d_backward: for the window [[4, 1], [4, 4]], whose maximum 4 is reached three times, the gradient 3 "
+        f"should go to the first in row-major order only, [[3, 0], [0, 0]], not {got.tolist()}"
+        + (": to every pixel that ties for the maximum?" if np.allclose(got, [[3.0, 0.0], [3.0, 3.0]]) else "")
+        + (": to the last of them, not the first?" if np.allclose(got, [[0.0, 0.0], [0.0, 3.0]]) else "")
+    )
+
+
+def test_max_pool2d_backward_matches_finite_differences(student, rng):
+    x = rng.standard_normal((2, 4, 6, 3))
+    grad_y = rng.standard_normal((2, 2, 3, 3))
+    grad_x = check_array(student.max_pool2d_backward(x, 2, grad_y), "max_pool2d_backward", x.shape, "∂L/∂x")
+    xx = x.copy()
+    numeric = numerical_gradient(lambda: float(np.sum(grad_y * max_pool(xx, 2))), xx, 1e-6)
+    check_close(grad_x, numeric, "max_pool2d_backward", "∂L/∂x (finite differences), 2 × 2 windows", 1e-5, 1e-8)
+    x3 = rng.standard_normal((1, 6, 3, 2))
+    grad_y3 = rng.standard_normal((1, 2, 1, 2))
+    numeric = numerical_gradient(lambda: float(np.sum(grad_y3 * max_pool(x3, 3))), x3, 1e-6)
+    check_close(check_array(student.max_pool2d_backward(x3, 3, grad_y3), "max_pool2d_backward", x3.shape, "∂L/∂x"),
+                numeric, "max_pool2d_backward", "∂L/∂x (finite differences), 3 × 3 windows on a 6 × 3 image",
+                1e-5, 1e-8)  # fmt: skip

@@ -158,3 +158,79 @@ def test_kl_shaped_rewards_penalise_every_token_where_it_is_chosen(student, sequ
         "kl_shaped_rewards",
         "the per-token rewards with R = 0 (each −β (log π − log π_ref), at its own token)",
     )
+
+
+# the transfer task: the Plackett–Luce loss of a ranking
+
+
+def plackett_luce_by_definition(scores):
+    total = 0.0
+    for row in scores:
+        for i in range(len(row) - 1):
+            total -= np.log(np.exp(row[i]) / np.sum(np.exp(row[i:])))
+    return total / len(scores)
+
+
+def test_plackett_luce_of_two_responses_is_bradley_terry(student, scores):
+    preferred, rejected = scores
+    result = call_checking_inputs(
+        student.plackett_luce_loss, "plackett_luce_loss", np.stack([preferred, rejected], axis=1)
+    )
+    assert isinstance(result, tuple) and len(result) == 2, "plackett_luce_loss should return (loss, grad)"
+    expected = reference_bt(preferred, rejected)
+    check_close(
+        check_scalar(result[0], "plackett_luce_loss"),
+        expected,
+        "plackett_luce_loss",
+        "the loss for K = 2 (the Bradley–Terry loss)",
+    )
+
+
+def test_plackett_luce_of_three_responses(student):
+    # one ranking of three scores (2, 1, 0): −log[e²/(e² + e + 1)] − log[e/(e + 1)]
+    scores = np.array([[2.0, 1.0, 0.0]])
+    loss, grad = student.plackett_luce_loss(scores)
+    expected = plackett_luce_by_definition(scores)
+    all_pairs = float(sum(np.logaddexp(0.0, -(scores[0, i] - scores[0, j])) for i in range(3) for j in range(i + 1, 3)))
+    full_softmax = float(sum(np.logaddexp.reduce(scores[0]) - scores[0, i] for i in range(2)))
+    _harness.expect_number(
+        loss, expected, "plackett_luce_loss", "the loss of the ranking (2, 1, 0)", "each choice among those left",
+        alternatives={
+            "Bradley–Terry on every pair, not one choice after another": all_pairs,
+            "each choice's softmax over all K responses, the ones already chosen included": full_softmax,
+        },
+    )  # fmt: skip
+    check_array(grad, "plackett_luce_loss", (1, 3), "the gradient")
+
+
+def test_plackett_luce_matches_finite_differences(student, rng):
+    scores = rng.normal(0.0, 1.5, (4, 5))
+    loss, grad = student.plackett_luce_loss(scores)
+    check_close(
+        check_scalar(loss, "plackett_luce_loss"),
+        plackett_luce_by_definition(scores),
+        "plackett_luce_loss",
+        "the loss, the mean over 4 rankings of 5",
+    )
+    s = scores.copy()
+    numeric = numerical_gradient(lambda: float(student.plackett_luce_loss(s)[0]), s, 1e-6)
+    check_close(
+        check_array(grad, "plackett_luce_loss", (4, 5), "the gradient"),
+        numeric,
+        "plackett_luce_loss",
+        "∂loss/∂scores (finite differences)",
+        1e-5,
+        1e-8,
+    )
+
+
+def test_plackett_luce_survives_huge_scores(student):
+    scores = np.array([[1000.0, 0.0, -1000.0], [-1000.0, 0.0, 1000.0]])
+    loss, grad = student.plackett_luce_loss(scores)
+    check_close(
+        check_scalar(loss, "plackett_luce_loss", "the loss for scores of ±1000"),
+        1500.0,
+        "plackett_luce_loss",
+        "the loss for scores of ±1000 (np.logaddexp keeps it finite)",
+    )
+    check_array(grad, "plackett_luce_loss", (2, 3), "the gradient for scores of ±1000")

@@ -7,7 +7,7 @@ log-probabilities, huge margins)."""
 import _harness
 import numpy as np
 import pytest
-from _harness import call_checking_inputs, check_array, check_close, check_scalar, numerical_gradient
+from _harness import call_checking_inputs, check_array, check_close, check_scalar, expect_number, numerical_gradient
 
 student = _harness.student  # the fixture: the implementation under test (see _harness.py)
 pytest_generate_tests = _harness.pytest_generate_tests  # one run per wrong variant under MINIPPO_IMPL=wrong
@@ -242,3 +242,51 @@ def test_dpo_loss_survives_huge_margins(student):
     check_close(loss, 500.0, "dpo_loss", "the loss for margins of +1000 and −1000")
     check_close(grad_w, [0.0, -0.5], "dpo_loss", "grad_preferred for margins of ±1000")
     check_close(grad_l, [0.0, 0.5], "dpo_loss", "grad_rejected for margins of ±1000")
+
+
+# the transfer task: IPO's loss
+
+
+@pytest.fixture
+def ipo_case(rng):
+    return rng.normal(-20, 3, 6), rng.normal(-20, 3, 6), rng.normal(-20, 3, 6), rng.normal(-20, 3, 6)
+
+
+def test_ipo_loss_of_one_pair(student):
+    # h = (−1 − (−2)) − (−3 − (−3)) = 1, τ = 0.25: target 2, loss (1 − 2)² = 1, ∂/∂ log π(y_w) = 2 (h − 2) = −2
+    args = (np.array([-1.0]), np.array([-3.0]), np.array([-2.0]), np.array([-3.0]))
+    result = call_checking_inputs(student.ipo_loss, "ipo_loss", *args, 0.25)
+    assert isinstance(result, tuple) and len(result) == 3, (
+        "ipo_loss should return (loss, grad_preferred, grad_rejected)"
+    )
+    expect_number(
+        result[0],
+        1.0,
+        "ipo_loss",
+        "the loss for one pair with h = 1, τ = 0.25",
+        "(h − 1/(2τ))² = (1 − 2)²",
+        alternatives={"the target 1/τ where IPO's is 1/(2τ)": 9.0},
+    )
+    expect_number(
+        check_array(result[1], "ipo_loss", (1,), "grad_preferred")[0], -2.0, "ipo_loss",
+        "∂L/∂ log π(y_w|x) for h = 1, τ = 0.25", "2 (h − 1/(2τ))",
+        alternatives={"the square's derivative without its factor 2": -1.0},
+    )  # fmt: skip
+    expect_number(
+        check_array(result[2], "ipo_loss", (1,), "grad_rejected")[0], 2.0, "ipo_loss",
+        "∂L/∂ log π(y_l|x) for h = 1, τ = 0.25", "−2 (h − 1/(2τ)): log π(y_l|x) enters h with a minus",
+        alternatives={"the preferred response's gradient, with the same sign": -2.0},
+    )  # fmt: skip
+
+
+def test_ipo_loss_matches_finite_differences(student, ipo_case):
+    logp_w, logp_l, ref_w, ref_l = ipo_case
+    loss, grad_w, grad_l = student.ipo_loss(logp_w, logp_l, ref_w, ref_l, 0.1)
+    h = (logp_w - ref_w) - (logp_l - ref_l)
+    check_close(check_scalar(loss, "ipo_loss"), float(np.mean((h - 5.0) ** 2)), "ipo_loss", "the loss, τ = 0.1")
+    for name, grad, variable in (("grad_preferred", grad_w, logp_w), ("grad_rejected", grad_l, logp_l)):
+        x = variable.copy()
+        others = (x, logp_l, ref_w, ref_l) if name == "grad_preferred" else (logp_w, x, ref_w, ref_l)
+        numeric = numerical_gradient(lambda others=others: float(student.ipo_loss(*others, 0.1)[0]), x, 1e-6)
+        check_close(check_array(grad, "ipo_loss", (6,), name), numeric, "ipo_loss", f"{name} (finite differences)",
+                    1e-5, 1e-8)  # fmt: skip

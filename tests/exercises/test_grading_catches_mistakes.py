@@ -17,7 +17,7 @@ from collections import defaultdict
 import _harness
 import numpy as np
 import pytest
-from make_exercises import SOLUTIONS, exercise_names, expected_exercises
+from make_exercises import SOLUTIONS, exercise_names, expected_exercises, transfer_names
 
 from minippo.grading.chapters import chapter_files
 from minippo.grading.supervisor import run_tests
@@ -51,6 +51,45 @@ def test_there_are_at_least_twelve_graded_exercises_in_ten_chapters():
     functions = [name for names in chapters.values() for name in names]
     assert len(chapters) >= 10 and len(functions) >= 12, (len(chapters), functions)
     assert sorted(chapters) == sorted(path.stem[5:] for path in chapter_files().values())
+
+
+def transfers_by_chapter() -> dict[str, list[str]]:
+    return {
+        path.stem: transfer_names(ast.parse(path.read_text(encoding="utf-8")))
+        for path in sorted(SOLUTIONS.glob("ch*.py"))
+    }
+
+
+def test_every_chapter_from_1_to_14_has_a_transfer_task():
+    chapters = {int(name[2:4]): names for name, names in transfers_by_chapter().items()}
+    assert sorted(chapters) == list(range(1, 15)), (
+        f"chapters without a solution module: {set(range(1, 15)) - set(chapters)}"
+    )
+    assert all(len(names) >= 1 for names in chapters.values()), [n for n, names in chapters.items() if not names]
+
+
+def test_no_transfer_task_is_answered_in_the_book_or_in_minippo():
+    """A transfer task asks for what the course never printed: the book may pose it by name, but defines it nowhere,
+    and minippo's code does not name it (its solution lives in solutions/ only)."""
+    pages = [path.read_text(encoding="utf-8") for path in (_harness.ROOT / "book").glob("*.md")]
+    code = [path.read_text(encoding="utf-8") for path in (_harness.ROOT / "minippo").rglob("*.py")]
+    for chapter, names in transfers_by_chapter().items():
+        for name in names:
+            assert not any(f"def {name}(" in page for page in pages), f"the book defines {chapter}.{name}"
+            assert not any(name in text for text in code), f"minippo's code names {chapter}.{name}"
+
+
+def test_every_transfer_task_has_wrong_and_right_variants():
+    """At least three wrong variants and one right variant for each transfer task, as the grader's proof."""
+    for chapter, names in transfers_by_chapter().items():
+        right_path = _harness.ROOT / "tests" / "exercises" / "right" / f"{chapter}.py"
+        spec = importlib.util.spec_from_file_location(f"_right_transfer_{chapter}", right_path)
+        right = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(right)
+        for name in names:
+            wrong = [variant for variant in variants_of(chapter).values() if name in variant]
+            assert len(wrong) >= 3, f"{chapter}.{name} has {len(wrong)} wrong variant(s)"
+            assert any(name in variant for variant in right.VARIANTS.values()), f"{chapter}.{name} has no right variant"
 
 
 def test_every_exercise_function_is_called_by_its_grading_tests():

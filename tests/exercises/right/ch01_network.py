@@ -39,3 +39,21 @@ VARIANTS = {
     "mlp_forward_copies_the_input": {"mlp_forward": mlp_forward_copies_the_input},
     "adam_step_written_out": {"adam_step": adam_step_written_out},
 }
+
+
+def layer_norm_backward_by_jacobian(x, gain, grad_y):
+    """Each row's full d × d Jacobian of x̂ written out and multiplied, instead of the folded formula."""
+    n, d = x.shape
+    grad_x = np.zeros((n, d))
+    grad_gain = np.zeros(d)
+    for i in range(n):
+        centred = x[i] - x[i].mean()
+        std = np.sqrt(centred @ centred / d + 1e-5)
+        x_hat = centred / std
+        jacobian = (np.eye(d) - 1.0 / d) / std - np.outer(x_hat, x_hat) / (d * std)
+        grad_x[i] = jacobian.T @ (grad_y[i] * gain)
+        grad_gain += grad_y[i] * x_hat
+    return grad_x, grad_gain
+
+
+VARIANTS["layer_norm_backward_by_jacobian"] = {"layer_norm_backward": layer_norm_backward_by_jacobian}

@@ -48,3 +48,19 @@ VARIANTS = {
     "categorical_entropy_where": {"categorical_entropy": categorical_entropy_where},
     "gaussian_log_prob_by_dimension": {"gaussian_log_prob": gaussian_log_prob_by_dimension},
 }
+
+
+def tempered_by_rescaled_logits(logits, temperature, actions):
+    """Chapter 2's log-softmax on z/τ, and ∂/∂τ written as −(z_a − E_π[z])/τ² with the expectation taken explicitly."""
+    scaled = logits / temperature
+    log_probs = scaled - np.logaddexp.reduce(scaled, axis=1, keepdims=True)
+    probs = np.exp(log_probs)
+    rows = np.arange(len(actions))
+    onehot = np.zeros(logits.shape)
+    onehot[rows, actions] = 1.0
+    expected_logit = (probs * logits).sum(axis=1)
+    grad_temperature = -(logits[rows, actions] - expected_logit) / temperature**2
+    return log_probs[rows, actions], (onehot - probs) / temperature, grad_temperature
+
+
+VARIANTS["tempered_by_rescaled_logits"] = {"tempered_categorical_log_prob": tempered_by_rescaled_logits}

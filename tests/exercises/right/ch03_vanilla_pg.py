@@ -32,3 +32,21 @@ VARIANTS = {
     "normalize_advantages_by_hand": {"normalize_advantages": normalize_advantages_by_hand},
     "normalize_advantages_guarding_zero_std": {"normalize_advantages": normalize_advantages_guarding_zero_std},
 }
+
+
+def linear_pg_sample_by_sample(features, theta, actions, advantages):
+    """One sample at a time: the outer product of the features with that sample's score, averaged."""
+    n, (d, k) = len(actions), theta.shape
+    grad, value = np.zeros((d, k)), 0.0
+    for t in range(n):
+        logits = features[t] @ theta
+        probs = np.exp(logits - logits.max())
+        probs /= probs.sum()
+        score = -probs
+        score[actions[t]] += 1.0
+        grad += np.outer(features[t], score) * advantages[t] / n
+        value += np.log(probs[actions[t]]) * advantages[t] / n
+    return float(value), grad
+
+
+VARIANTS["linear_pg_sample_by_sample"] = {"linear_softmax_policy_gradient": linear_pg_sample_by_sample}

@@ -3,14 +3,6 @@
 import numpy as np
 
 
-def clipped_surrogate_closed_band(logp, logp_old, advantages, epsilon):
-    """The gradient passed on the closed band 1 − ε ≤ r ≤ 1 + ε (a tie at the edge sent the other way)."""
-    ratio = np.exp(logp - logp_old)
-    inside = (ratio >= 1.0 - epsilon) & (ratio <= 1.0 + epsilon)
-    value = np.mean(np.minimum(np.maximum(ratio, 1.0 - epsilon), 1.0 + epsilon) * advantages)
-    return float(value), np.where(inside, ratio * advantages, 0.0) / len(ratio)
-
-
 def clip_fraction_two_sides(logp, logp_old, epsilon):
     """Counts r < 1 − ε and r > 1 + ε separately."""
     ratio = np.exp(logp - logp_old)
@@ -23,7 +15,23 @@ def clip_fraction_expm1(logp, logp_old, epsilon):
 
 
 VARIANTS = {
-    "clipped_surrogate_closed_band": {"clipped_surrogate": clipped_surrogate_closed_band},
     "clip_fraction_two_sides": {"clip_fraction": clip_fraction_two_sides},
     "clip_fraction_expm1": {"clip_fraction": clip_fraction_expm1},
 }
+
+
+def dual_clip_case_by_case(logp, logp_old, advantages, epsilon, dual_clip):
+    """Case by case on the sign of Â: (min(r, 1 + ε)) Â above 0; below it, Â times r held in [1 − ε, c] from both
+    sides with the gradient alive only where r is strictly between the two."""
+    ratio = np.exp(logp - logp_old)
+    n = len(logp)
+    positive = advantages >= 0
+    value_pos = np.minimum(ratio, 1 + epsilon) * advantages
+    grad_pos = np.where(ratio <= 1 + epsilon, ratio * advantages, 0.0)
+    held = np.minimum(np.maximum(ratio, 1 - epsilon), dual_clip)
+    value_neg = held * advantages
+    grad_neg = np.where((ratio >= 1 - epsilon) & (ratio <= dual_clip), ratio * advantages, 0.0)
+    return float(np.mean(np.where(positive, value_pos, value_neg))), np.where(positive, grad_pos, grad_neg) / n
+
+
+VARIANTS["dual_clip_case_by_case"] = {"dual_clip_surrogate": dual_clip_case_by_case}

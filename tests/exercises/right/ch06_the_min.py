@@ -31,3 +31,23 @@ VARIANTS = {
     "clip_objective_case_by_case": {"clip_objective": clip_objective_case_by_case},
     "clip_objective_loop": {"clip_objective": clip_objective_loop},
 }
+
+
+def logits_gradient_by_jacobian(logits, actions, logp_old, advantages, epsilon):
+    """The softmax's Jacobian written out per row, with a case-by-case switch instead of comparing the two terms."""
+    n, k = logits.shape
+    value, grad = 0.0, np.zeros((n, k))
+    for t in range(n):
+        probs = np.exp(logits[t] - logits[t].max())
+        probs /= probs.sum()
+        ratio = probs[actions[t]] / np.exp(logp_old[t])
+        a = advantages[t]
+        value += min(ratio * a, min(max(ratio, 1 - epsilon), 1 + epsilon) * a) / n
+        switched_off = (a > 0 and ratio > 1 + epsilon) or (a < 0 and ratio < 1 - epsilon)
+        if not switched_off:
+            jacobian = np.diag(probs) - np.outer(probs, probs)  # ∂π/∂z
+            grad[t] = a / np.exp(logp_old[t]) * jacobian[actions[t]] / n  # ∂(r Â)/∂z = Â ∂π(a)/∂z / π_old
+    return float(value), grad
+
+
+VARIANTS["logits_gradient_by_jacobian"] = {"clip_objective_logits_gradient": logits_gradient_by_jacobian}

@@ -46,3 +46,20 @@ VARIANTS = {
     "discounted_returns_column_by_column": {"discounted_returns": discounted_returns_column_by_column},
     "gae_with_masks": {"gae": gae_with_masks},
 }
+
+
+def step_gae_vectorised_flags(rewards, values, next_values, terminated, truncated, gammas, lam):
+    """(1 − done) masks and a discount array for the carry, built before the loop."""
+    deltas = rewards + gammas * (1.0 - terminated) * next_values - values
+    keep = 1.0 - (terminated | truncated)
+    keep[-1] = 0.0
+    factors = gammas * lam * keep
+    result = np.zeros(len(deltas))
+    carry = 0.0
+    for t in reversed(range(len(deltas))):
+        carry = deltas[t] + factors[t] * carry
+        result[t] = carry
+    return result
+
+
+VARIANTS["step_gae_vectorised_flags"] = {"gae_with_step_discounts": step_gae_vectorised_flags}

@@ -31,3 +31,13 @@ VARIANTS = {
     "clipped_value_loss_ties_to_clipped": {"clipped_value_loss": clipped_value_loss_ties_to_clipped},
     "clip_vf_s_objective_terms": {"clip_vf_s_objective": clip_vf_s_objective_terms},
 }
+
+
+def huber_as_clipped_parabola(values, value_targets, delta):
+    """½ m² + δ (|e| − m) with m = min(|e|, δ), one expression for both parts."""
+    error = values - value_targets
+    m = np.minimum(np.abs(error), delta)
+    return float(np.mean(0.5 * m * m + delta * (np.abs(error) - m))), np.sign(error) * m / len(values)
+
+
+VARIANTS["huber_as_clipped_parabola"] = {"huber_value_loss": huber_as_clipped_parabola}

@@ -27,3 +27,20 @@ VARIANTS = {
     "adaptive_beta_other_order": {"adaptive_beta": adaptive_beta_other_order},
     "categorical_kl_logsumexp": {"categorical_kl": categorical_kl_logsumexp},
 }
+
+
+def reverse_kl_by_jacobian(logits_old, logits, grad_kl):
+    """The softmax's Jacobian applied to ∂KL/∂π_j = log π_j − log π_old,j + 1, row by row."""
+    n, k = logits.shape
+    kl, grad = np.zeros(n), np.zeros((n, k))
+    for i in range(n):
+        log_new = logits[i] - np.logaddexp.reduce(logits[i])
+        log_old = logits_old[i] - np.logaddexp.reduce(logits_old[i])
+        probs = np.exp(log_new)
+        kl[i] = probs @ (log_new - log_old)
+        jacobian = np.diag(probs) - np.outer(probs, probs)
+        grad[i] = jacobian @ (log_new - log_old + 1.0) * grad_kl[i]
+    return kl, grad
+
+
+VARIANTS["reverse_kl_by_jacobian"] = {"reverse_kl_backward": reverse_kl_by_jacobian}

@@ -132,3 +132,28 @@ VARIANTS = {
     "collect_step_by_step": {"collect": collect_step_by_step},
     "collect_preallocated": {"collect": collect_preallocated},
 }
+
+
+def trunk_through_the_logits_jacobian(features, policy_weights, value_weights, actions, logp_old, advantages, returns,
+                                      epsilon, value_coef):  # fmt: skip
+    """Sample by sample: ∂ log π(a|s)/∂h = W_π[:, a] − W_π π, the two heads' paths added, no log-softmax matrix."""
+    n = len(actions)
+    loss, grad = 0.0, np.zeros(features.shape)
+    for t in range(n):
+        logits = features[t] @ policy_weights
+        probs = np.exp(logits - logits.max())
+        probs /= probs.sum()
+        ratio = probs[actions[t]] / np.exp(logp_old[t])
+        a = advantages[t]
+        clipped = min(max(ratio, 1 - epsilon), 1 + epsilon)
+        loss -= min(ratio * a, clipped * a) / n
+        score_h = policy_weights[:, actions[t]] - policy_weights @ probs
+        if ratio * a <= clipped * a:
+            grad[t] -= ratio * a * score_h / n
+        error = features[t] @ value_weights - returns[t]
+        loss += value_coef * 0.5 * error * error / n
+        grad[t] += value_coef * error * value_weights / n
+    return float(loss), grad
+
+
+VARIANTS["trunk_through_the_logits_jacobian"] = {"shared_trunk_gradient": trunk_through_the_logits_jacobian}

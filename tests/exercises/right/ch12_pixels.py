@@ -94,3 +94,20 @@ VARIANTS = {
     "im2col": {"conv2d_forward": forward_im2col, "conv2d_backward": backward_im2col},
     "einsum_full_convolution": {"conv2d_forward": forward_einsum, "conv2d_backward": backward_einsum},
 }
+
+
+def max_pool_backward_by_loops(x, size, grad_y):
+    """Window by window with np.unravel_index, no reshapes."""
+    n, H, W, C = x.shape
+    grad_x = np.zeros(x.shape)
+    for b in range(n):
+        for i in range(H // size):
+            for j in range(W // size):
+                for c in range(C):
+                    window = x[b, size * i : size * (i + 1), size * j : size * (j + 1), c]
+                    p, q = np.unravel_index(np.argmax(window), window.shape)
+                    grad_x[b, size * i + p, size * j + q, c] = grad_y[b, i, j, c]
+    return grad_x
+
+
+VARIANTS["max_pool_backward_by_loops"] = {"max_pool2d_backward": max_pool_backward_by_loops}

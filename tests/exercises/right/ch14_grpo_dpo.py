@@ -58,3 +58,14 @@ VARIANTS = {
     "grpo_objective_token_by_token": {"grpo_objective": grpo_objective_token_by_token},
     "dpo_with_log1p": {"dpo_loss": dpo_with_log1p},
 }
+
+
+def ipo_through_the_margin(logp_preferred, logp_rejected, ref_preferred, ref_rejected, tau):
+    """The mean squared error of h against its target, with ∂/∂h first and the two signs of ∂h applied after."""
+    h = logp_preferred - logp_rejected - (ref_preferred - ref_rejected)
+    residual = h - 0.5 / tau
+    grad_h = 2.0 * residual / len(h)
+    return float(residual @ residual / len(h)), grad_h, -grad_h
+
+
+VARIANTS["ipo_through_the_margin"] = {"ipo_loss": ipo_through_the_margin}

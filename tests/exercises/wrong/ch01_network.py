@@ -179,3 +179,57 @@ FIRST_FAILURE = {
     "tanh_backward_tanh_again": r"h is already tanh\(z\)",
     "linear_backward_mean_bias": r"grad_b .*n = \d+ times too small everywhere: a mean where the sum belongs",
 }
+
+
+# the transfer task
+
+
+def _layer_norm_parts(x, gain, grad_y):
+    centred = x - x.mean(axis=1, keepdims=True)
+    inv_std = 1.0 / np.sqrt((centred * centred).mean(axis=1, keepdims=True) + 1e-5)
+    return centred * inv_std, inv_std, grad_y * gain
+
+
+def ln_statistics_constant(x, gain, grad_y):
+    """The row's mean and variance treated as constants: ∂L/∂x = gain · ∂L/∂y / σ."""
+    x_hat, inv_std, g = _layer_norm_parts(x, gain, grad_y)
+    return g * inv_std, (grad_y * x_hat).sum(axis=0)
+
+
+def ln_variance_constant(x, gain, grad_y):
+    """The mean's dependence on the row kept, the variance's forgotten."""
+    x_hat, inv_std, g = _layer_norm_parts(x, gain, grad_y)
+    return inv_std * (g - g.mean(axis=1, keepdims=True)), (grad_y * x_hat).sum(axis=0)
+
+
+def ln_gain_gradient_mean(x, gain, grad_y):
+    """∂L/∂gain averaged over the batch instead of summed."""
+    x_hat, inv_std, g = _layer_norm_parts(x, gain, grad_y)
+    grad_x = inv_std * (g - g.mean(axis=1, keepdims=True) - x_hat * (g * x_hat).mean(axis=1, keepdims=True))
+    return grad_x, (grad_y * x_hat).mean(axis=0)
+
+
+def ln_gain_forgotten_in_grad_x(x, gain, grad_y):
+    """∂L/∂x carried back from ∂L/∂y without the gain's factor."""
+    x_hat, inv_std, _ = _layer_norm_parts(x, gain, grad_y)
+    g = grad_y
+    grad_x = inv_std * (g - g.mean(axis=1, keepdims=True) - x_hat * (g * x_hat).mean(axis=1, keepdims=True))
+    return grad_x, (grad_y * x_hat).sum(axis=0)
+
+
+VARIANTS.update(
+    {
+        "ln_statistics_constant": {"layer_norm_backward": ln_statistics_constant},
+        "ln_variance_constant": {"layer_norm_backward": ln_variance_constant},
+        "ln_gain_gradient_mean": {"layer_norm_backward": ln_gain_gradient_mean},
+        "ln_gain_forgotten_in_grad_x": {"layer_norm_backward": ln_gain_forgotten_in_grad_x},
+    }
+)
+FIRST_FAILURE.update(
+    {
+        "ln_statistics_constant": r"mean treated as a constant",
+        "ln_variance_constant": r"variance treated as a constant",
+        "ln_gain_gradient_mean": r"n = 5 times too small everywhere: a mean where the sum belongs",
+        "ln_gain_forgotten_in_grad_x": r"without the gain's factor",
+    }
+)

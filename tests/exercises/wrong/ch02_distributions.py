@@ -298,3 +298,64 @@ FIRST_FAILURE.update(
         "log_softmax_without_keepdims": r"could not be broadcast",
     }
 )
+
+
+# the transfer task
+
+
+def _tempered_parts(logits, temperature, actions):
+    scaled = logits / temperature
+    shifted = scaled - scaled.max(axis=1, keepdims=True)
+    log_probs = shifted - np.log(np.exp(shifted).sum(axis=1, keepdims=True))
+    score = -np.exp(log_probs)
+    rows = np.arange(len(actions))
+    score[rows, actions] += 1.0
+    return log_probs[rows, actions], score
+
+
+def tempered_no_inner_derivative(logits, temperature, actions):
+    """∂ log π/∂z as chapter 2's score, without the 1/τ that z/τ brings."""
+    logp, score = _tempered_parts(logits, temperature, actions)
+    return logp, score, -(score * logits).sum(axis=1) / temperature**2
+
+
+def tempered_temperature_sign(logits, temperature, actions):
+    """∂ log π/∂τ with the sign flipped (the derivative of z/τ taken as +z/τ²)."""
+    logp, score = _tempered_parts(logits, temperature, actions)
+    return logp, score / temperature, (score * logits).sum(axis=1) / temperature**2
+
+
+def tempered_temperature_without_the_mean(logits, temperature, actions):
+    """∂ log π/∂τ = −z_a/τ², the normaliser's own dependence on τ forgotten."""
+    logp, score = _tempered_parts(logits, temperature, actions)
+    return logp, score / temperature, -logits[np.arange(len(actions)), actions] / temperature**2
+
+
+def tempered_naive_softmax(logits, temperature, actions):
+    """log of a softmax computed without subtracting the maximum: overflows for logits of 1000."""
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        probs = np.exp(logits / temperature) / np.exp(logits / temperature).sum(axis=1, keepdims=True)
+        rows = np.arange(len(actions))
+        score = -probs
+        score[rows, actions] += 1.0
+        return np.log(probs[rows, actions]), score / temperature, -(score * logits).sum(axis=1) / temperature**2
+
+
+VARIANTS.update(
+    {
+        "tempered_no_inner_derivative": {"tempered_categorical_log_prob": tempered_no_inner_derivative},
+        "tempered_temperature_sign": {"tempered_categorical_log_prob": tempered_temperature_sign},
+        "tempered_temperature_without_the_mean": {
+            "tempered_categorical_log_prob": tempered_temperature_without_the_mean
+        },
+        "tempered_naive_softmax": {"tempered_categorical_log_prob": tempered_naive_softmax},
+    }
+)
+FIRST_FAILURE.update(
+    {
+        "tempered_no_inner_derivative": r"∂ log π/∂z at τ = 0\.5 .*(twice the expected everywhere|factor)",
+        "tempered_temperature_sign": r"∂ log π/∂τ has the opposite sign",
+        "tempered_temperature_without_the_mean": r"normaliser log Σ exp\(z/τ\) depends on τ too",
+        "tempered_naive_softmax": r"logits of ±1000",
+    }
+)

@@ -114,3 +114,61 @@ FIRST_FAILURE = {
     "pg_objective_float32_gradient": r"float64.*not float32",
     "normalize_in_place": r"changed its input",
 }
+
+
+# the transfer task
+
+
+def _linear_parts(features, theta, actions):
+    logits = features @ theta
+    log_probs = logits - np.log(np.exp(logits).sum(axis=1, keepdims=True))
+    rows = np.arange(len(actions))
+    score = -np.exp(log_probs)
+    score[rows, actions] += 1.0
+    return log_probs[rows, actions], score
+
+
+def linear_pg_onehot_only(features, theta, actions, advantages):
+    """The score without its −π term: as if log π(a|s) were the logit s θ[:, a]."""
+    logp, _ = _linear_parts(features, theta, actions)
+    onehot = np.zeros((len(actions), theta.shape[1]))
+    onehot[np.arange(len(actions)), actions] = 1.0
+    return float(np.mean(logp * advantages)), features.T @ (onehot * advantages[:, None]) / len(actions)
+
+
+def linear_pg_summed(features, theta, actions, advantages):
+    """The gradient summed over the batch, the value averaged."""
+    logp, score = _linear_parts(features, theta, actions)
+    return float(np.mean(logp * advantages)), features.T @ (score * advantages[:, None])
+
+
+def linear_pg_of_the_probability(features, theta, actions, advantages):
+    """The gradient of π(a|s) Â instead of log π(a|s) Â: the score times π(a|s)."""
+    logp, score = _linear_parts(features, theta, actions)
+    weight = np.exp(logp) * advantages
+    return float(np.mean(logp * advantages)), features.T @ (score * weight[:, None]) / len(actions)
+
+
+def linear_pg_transposed_product(features, theta, actions, advantages):
+    """The outer product taken the other way round and transposed back: (score Â)ᵀ x / n, reshaped to (d, k)."""
+    logp, score = _linear_parts(features, theta, actions)
+    wrong = (score * advantages[:, None]).T @ features / len(actions)
+    return float(np.mean(logp * advantages)), wrong.reshape(theta.shape)
+
+
+VARIANTS.update(
+    {
+        "linear_pg_onehot_only": {"linear_softmax_policy_gradient": linear_pg_onehot_only},
+        "linear_pg_summed": {"linear_softmax_policy_gradient": linear_pg_summed},
+        "linear_pg_of_the_probability": {"linear_softmax_policy_gradient": linear_pg_of_the_probability},
+        "linear_pg_transposed_product": {"linear_softmax_policy_gradient": linear_pg_transposed_product},
+    }
+)
+FIRST_FAILURE.update(
+    {
+        "linear_pg_onehot_only": r"without its −π term",
+        "linear_pg_summed": r"7 = n times too large everywhere",
+        "linear_pg_of_the_probability": r"gradient of π instead of log π",
+        "linear_pg_transposed_product": r"the outer product taken as \(score Â\)ᵀ x",
+    }
+)

@@ -71,3 +71,49 @@ FIRST_FAILURE = {
     "ratio_first_order": r"first-order approximation",
     "ratio_inverted": r"the inverse \(log π and log π_old swapped\?\)",
 }
+
+
+# the transfer task
+
+
+def weighted_denominator_constant(logp, logp_old, advantages):
+    """Σ r in the denominator treated as a constant: ∂/∂ log π_t = r_t Â_t / Σ r."""
+    ratio = np.exp(logp - logp_old)
+    return float(np.sum(ratio * advantages) / ratio.sum()), ratio * advantages / ratio.sum()
+
+
+def weighted_cpi_gradient(logp, logp_old, advantages):
+    """The right value with L^CPI's gradient r Â / n."""
+    ratio = np.exp(logp - logp_old)
+    return float(np.sum(ratio * advantages) / ratio.sum()), ratio * advantages / len(logp)
+
+
+def weighted_quotient_sign(logp, logp_old, advantages):
+    """The quotient rule's second term added instead of subtracted: w_t (Â_t + value)."""
+    ratio = np.exp(logp - logp_old)
+    weights = ratio / ratio.sum()
+    value = float(np.sum(weights * advantages))
+    return value, weights * (advantages + value)
+
+
+def weighted_mean_of_ratios(logp, logp_old, advantages):
+    """The advantages' plain mean, as if every r_t were 1 (the weights forgotten), and no gradient."""
+    return float(np.mean(advantages)), np.zeros(len(logp))
+
+
+VARIANTS.update(
+    {
+        "weighted_denominator_constant": {"weighted_cpi_objective": weighted_denominator_constant},
+        "weighted_cpi_gradient": {"weighted_cpi_objective": weighted_cpi_gradient},
+        "weighted_quotient_sign": {"weighted_cpi_objective": weighted_quotient_sign},
+        "weighted_mean_of_ratios": {"weighted_cpi_objective": weighted_mean_of_ratios},
+    }
+)
+FIRST_FAILURE.update(
+    {
+        "weighted_denominator_constant": r"denominator Σ r treated as a constant",
+        "weighted_cpi_gradient": r"should sum to 0.*L\^CPI's gradient",
+        "weighted_quotient_sign": r"should sum to 0.*second term added",
+        "weighted_mean_of_ratios": r"the value should be",
+    }
+)

@@ -127,12 +127,12 @@ VARIANTS.update(
 )
 
 FIRST_FAILURE = {
-    "without_the_min": r"r = 1\.5, Â = -1\.0.*the clipped term alone",
+    "without_the_min": r"r = 1\.5, Â = -1\.0.*, not -1\.2: the clipped term alone",
     "max_instead_of_min": r"the optimistic bound; L\^CLIP takes the min",
-    "min_of_the_ratios": r"the min taken over the ratios",
-    "gradient_zero_outside_the_band": r"r = 1\.5, Â = -1\.0.*should be -1\.5",
+    "min_of_the_ratios": r", not -0\.5: min\(r, clip\(r\)\) Â: the min taken over the ratios",
+    "gradient_zero_outside_the_band": r"r = 1\.5, Â = -1\.0.*, not 0: the gradient of the clipped term alone",
     "gradient_never_zero": r"r = 1\.5, Â = 1\.0.*should be 0",
-    "case_by_case_on_log_ratio": r"r = 1\.21.*not on log r",
+    "case_by_case_on_log_ratio": r"r = 1\.21.*not on log r.*, not 1\.21: the log-ratio clipped to ±ε",
     "gradient_mask_strict": r"r = 1\.1, Â = 2\.0.*should be 2\.2.*inside the band.*, not 0",
     "epsilon_fixed": r"ε = 0\.1.*ε fixed at 0\.2",
     "gradient_of_the_min_value": r"r = 1\.5, Â = 1\.0.*should be 0",
@@ -140,3 +140,66 @@ FIRST_FAILURE = {
     "clip_of_the_product": r"r = 0\.9, Â = -1\.0.*np\.clip\(r Â, \(1 − ε\) Â, \(1 \+ ε\) Â\)",
     "clip_of_the_log_ratio": r"r = 1\.5, Â = 1\.0.*the log-ratio clipped to ±ε",
 }
+
+
+# the transfer task
+
+
+def _logits_parts(logits, actions, logp_old, advantages, epsilon):
+    n = len(actions)
+    log_probs = logits - np.log(np.exp(logits).sum(axis=1, keepdims=True))
+    ratio = np.exp(log_probs[np.arange(n), actions] - logp_old)
+    unclipped = ratio * advantages
+    clipped = np.clip(ratio, 1 - epsilon, 1 + epsilon) * advantages
+    score = -np.exp(log_probs)
+    score[np.arange(n), actions] += 1.0
+    return float(np.mean(np.minimum(unclipped, clipped))), unclipped, clipped, score
+
+
+def logits_cpi_gradient(logits, actions, logp_old, advantages, epsilon):
+    """L^CPI's gradient r Â / n carried to the logits: nothing switched off."""
+    value, unclipped, _, score = _logits_parts(logits, actions, logp_old, advantages, epsilon)
+    return value, score * (unclipped / len(actions))[:, None]
+
+
+def logits_onehot_only(logits, actions, logp_old, advantages, epsilon):
+    """Only the chosen action's logit gets the gradient: the softmax's −π term forgotten."""
+    value, unclipped, clipped, score = _logits_parts(logits, actions, logp_old, advantages, epsilon)
+    grad_logp = np.where(unclipped <= clipped, unclipped, 0.0) / len(actions)
+    onehot = np.zeros(logits.shape)
+    onehot[np.arange(len(actions)), actions] = 1.0
+    return value, onehot * grad_logp[:, None]
+
+
+def logits_broadcast(logits, actions, logp_old, advantages, epsilon):
+    """∂L/∂ log π copied to every logit of the row."""
+    value, unclipped, clipped, _ = _logits_parts(logits, actions, logp_old, advantages, epsilon)
+    grad_logp = np.where(unclipped <= clipped, unclipped, 0.0) / len(actions)
+    return value, np.repeat(grad_logp[:, None], logits.shape[1], axis=1)
+
+
+def logits_probability_gradient(logits, actions, logp_old, advantages, epsilon):
+    """The chain taken through π instead of log π: the score times π(a|s) once more."""
+    value, unclipped, clipped, score = _logits_parts(logits, actions, logp_old, advantages, epsilon)
+    log_probs = logits - np.log(np.exp(logits).sum(axis=1, keepdims=True))
+    grad_logp = np.where(unclipped <= clipped, unclipped, 0.0) / len(actions)
+    prob = np.exp(log_probs[np.arange(len(actions)), actions])
+    return value, score * (grad_logp * prob)[:, None]
+
+
+VARIANTS.update(
+    {
+        "logits_cpi_gradient": {"clip_objective_logits_gradient": logits_cpi_gradient},
+        "logits_onehot_only": {"clip_objective_logits_gradient": logits_onehot_only},
+        "logits_broadcast": {"clip_objective_logits_gradient": logits_broadcast},
+        "logits_probability_gradient": {"clip_objective_logits_gradient": logits_probability_gradient},
+    }
+)
+FIRST_FAILURE.update(
+    {
+        "logits_cpi_gradient": r"L\^CPI's gradient carried to the logits",
+        "logits_onehot_only": r"only the chosen action's logit",
+        "logits_broadcast": r"broadcast to every logit",
+        "logits_probability_gradient": r"π = \(½, ½\), a = 0, r = 1",
+    }
+)

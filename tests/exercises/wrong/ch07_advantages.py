@@ -270,3 +270,72 @@ FIRST_FAILURE = {
     "gae_resets_a_step_early": r"ends at step 1 by termination.*step 1: terminated = True",
     "gae_truncation_as_termination": r"ends at step 1 by truncation",
 }
+
+
+# the transfer task
+
+
+def _step_deltas(rewards, values, next_values, terminated, gammas):
+    return rewards + gammas * np.where(terminated, 0.0, next_values) - values
+
+
+def step_gae_next_discount(rewards, values, next_values, terminated, truncated, gammas, lam):
+    """The carry discounted by γ_{t+1}, the next step's own discount."""
+    deltas = _step_deltas(rewards, values, next_values, terminated, gammas)
+    result, carry = np.zeros(len(deltas)), 0.0
+    for t in range(len(deltas) - 1, -1, -1):
+        ends = terminated[t] or truncated[t] or t == len(deltas) - 1
+        carry = deltas[t] + (0.0 if ends else gammas[t + 1] * lam * carry)
+        result[t] = carry
+    return result
+
+
+def step_gae_mean_discount(rewards, values, next_values, terminated, truncated, gammas, lam):
+    """One γ for the whole batch, the mean of the gammas."""
+    gamma = float(np.mean(gammas))
+    deltas = rewards + gamma * np.where(terminated, 0.0, next_values) - values
+    result, carry = np.zeros(len(deltas)), 0.0
+    for t in range(len(deltas) - 1, -1, -1):
+        ends = terminated[t] or truncated[t] or t == len(deltas) - 1
+        carry = deltas[t] + (0.0 if ends else gamma * lam * carry)
+        result[t] = carry
+    return result
+
+
+def step_gae_across_episodes(rewards, values, next_values, terminated, truncated, gammas, lam):
+    """The carry never reset at an episode's end."""
+    deltas = _step_deltas(rewards, values, next_values, terminated, gammas)
+    result, carry = np.zeros(len(deltas)), 0.0
+    for t in range(len(deltas) - 1, -1, -1):
+        carry = deltas[t] + (0.0 if t == len(deltas) - 1 else gammas[t] * lam * carry)
+        result[t] = carry
+    return result
+
+
+def step_gae_discount_only_in_the_carry(rewards, values, next_values, terminated, truncated, gammas, lam):
+    """The per-step γ in the carry, but δ_t bootstrapped with γ = 1."""
+    deltas = rewards + np.where(terminated, 0.0, next_values) - values
+    result, carry = np.zeros(len(deltas)), 0.0
+    for t in range(len(deltas) - 1, -1, -1):
+        ends = terminated[t] or truncated[t] or t == len(deltas) - 1
+        carry = deltas[t] + (0.0 if ends else gammas[t] * lam * carry)
+        result[t] = carry
+    return result
+
+
+VARIANTS.update(
+    {
+        "step_gae_next_discount": {"gae_with_step_discounts": step_gae_next_discount},
+        "step_gae_mean_discount": {"gae_with_step_discounts": step_gae_mean_discount},
+        "step_gae_across_episodes": {"gae_with_step_discounts": step_gae_across_episodes},
+        "step_gae_discount_only_in_the_carry": {"gae_with_step_discounts": step_gae_discount_only_in_the_carry},
+    }
+)
+FIRST_FAILURE.update(
+    {
+        "step_gae_next_discount": r"carry discounted by γ_\{t\+1\}",
+        "step_gae_mean_discount": r"one γ for the whole batch",
+        "step_gae_across_episodes": r"carry not stopped at an episode's end",
+        "step_gae_discount_only_in_the_carry": r"bootstrapped without its γ_t",
+    }
+)

@@ -138,10 +138,60 @@ VARIANTS.update(
 
 FIRST_FAILURE = {
     "clipped_value_loss_min": r"V moved 0\.5 > ε away.*the clipped loss is pessimistic, it takes the max\?$",
-    "clipped_value_loss_around_the_target": r"clipped around V\^targ instead of around V_old",
+    "clipped_value_loss_around_the_target": r", not [-\d.]+: V clipped around V\^targ instead of around V_old",
+    "clipped_value_loss_clips_the_value": r", not [-\d.]+: V itself clipped to \[−ε, ε\]",
     "clipped_value_loss_gradient_through_clip": r"V\^clip is a constant",
     "clipped_value_loss_epsilon_fixed": r"ε = 0\.4.*ε fixed at 0\.2",
     "objective_epsilon_fixed": r"ε = 0\.35.*ε fixed at 0\.2",
     "objective_adds_the_value_loss": r"value loss enters with −c1|the value loss added",
     "objective_subtracts_the_entropy": r"the bonus enters with \+c2|entropy bonus subtracted",
 }
+
+
+# the transfer task
+
+
+def huber_gradient_unclipped(values, value_targets, delta):
+    """The loss right, the gradient the squared error's, e / n, everywhere."""
+    error = values - value_targets
+    loss = np.where(np.abs(error) <= delta, 0.5 * error**2, delta * (np.abs(error) - 0.5 * delta))
+    return float(np.mean(loss)), error / len(values)
+
+
+def huber_line_without_offset(values, value_targets, delta):
+    """The linear part δ |e|, which does not meet the parabola at |e| = δ."""
+    error = values - value_targets
+    loss = np.where(np.abs(error) <= delta, 0.5 * error**2, delta * np.abs(error))
+    return float(np.mean(loss)), np.clip(error, -delta, delta) / len(values)
+
+
+def huber_gradient_sign_only(values, value_targets, delta):
+    """Beyond δ, the gradient sign(e) / n, without the line's slope δ."""
+    error = values - value_targets
+    loss = np.where(np.abs(error) <= delta, 0.5 * error**2, delta * (np.abs(error) - 0.5 * delta))
+    return float(np.mean(loss)), np.where(np.abs(error) <= delta, error, np.sign(error)) / len(values)
+
+
+def huber_summed(values, value_targets, delta):
+    """Summed over the batch, loss and gradient."""
+    error = values - value_targets
+    loss = np.where(np.abs(error) <= delta, 0.5 * error**2, delta * (np.abs(error) - 0.5 * delta))
+    return float(np.sum(loss)), np.clip(error, -delta, delta)
+
+
+VARIANTS.update(
+    {
+        "huber_gradient_unclipped": {"huber_value_loss": huber_gradient_unclipped},
+        "huber_line_without_offset": {"huber_value_loss": huber_line_without_offset},
+        "huber_gradient_sign_only": {"huber_value_loss": huber_gradient_sign_only},
+        "huber_summed": {"huber_value_loss": huber_summed},
+    }
+)
+FIRST_FAILURE.update(
+    {
+        "huber_gradient_unclipped": r"e = 3\.0 .*gradient e, unclipped",
+        "huber_line_without_offset": r"e = 3\.0 .*without the −½δ²",
+        "huber_gradient_sign_only": r"without the line's slope δ",
+        "huber_summed": r"mean Huber loss.*a sum over the batch where the mean belongs",
+    }
+)

@@ -160,3 +160,64 @@ FIRST_FAILURE = {
     "beta_rule_swapped": r"d = 0\.5 .*halved.*should become 0\.5, not 2",
     "beta_rule_by_1_5": r"should become 0\.5, not 0\.666667",
 }
+
+
+# the transfer task
+
+
+def _kl_logs(logits_old, logits):
+    def log_softmax(z):
+        shifted = z - z.max(axis=1, keepdims=True)
+        return shifted - np.log(np.exp(shifted).sum(axis=1, keepdims=True))
+
+    return log_softmax(logits_old), log_softmax(logits)
+
+
+def reverse_kl_forward_gradient(logits_old, logits, grad_kl):
+    """The reverse KL's value with the forward KL's gradient π − π_old."""
+    log_old, log_new = _kl_logs(logits_old, logits)
+    probs = np.exp(log_new)
+    return (probs * (log_new - log_old)).sum(axis=1), (probs - np.exp(log_old)) * grad_kl[:, None]
+
+
+def reverse_kl_without_the_mean(logits_old, logits, grad_kl):
+    """π_j (log π_j − log π_old,j): the −KL term, from the softmax's normaliser, forgotten."""
+    log_old, log_new = _kl_logs(logits_old, logits)
+    probs = np.exp(log_new)
+    gap = log_new - log_old
+    return (probs * gap).sum(axis=1), probs * gap * grad_kl[:, None]
+
+
+def reverse_kl_forward_value(logits_old, logits, grad_kl):
+    """KL[π_old ‖ π], chapter 9's order, with its gradient."""
+    log_old, log_new = _kl_logs(logits_old, logits)
+    probs_old = np.exp(log_old)
+    return (probs_old * (log_old - log_new)).sum(axis=1), (np.exp(log_new) - probs_old) * grad_kl[:, None]
+
+
+def reverse_kl_log_of_softmax(logits_old, logits, grad_kl):
+    """np.log of a softmax computed without the max shift: NaN or infinite for logits of ±1000."""
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        probs = np.exp(logits) / np.exp(logits).sum(axis=1, keepdims=True)
+        probs_old = np.exp(logits_old) / np.exp(logits_old).sum(axis=1, keepdims=True)
+        gap = np.log(probs) - np.log(probs_old)
+        kl = (probs * gap).sum(axis=1)
+        return kl, probs * (gap - kl[:, None]) * grad_kl[:, None]
+
+
+VARIANTS.update(
+    {
+        "reverse_kl_forward_gradient": {"reverse_kl_backward": reverse_kl_forward_gradient},
+        "reverse_kl_without_the_mean": {"reverse_kl_backward": reverse_kl_without_the_mean},
+        "reverse_kl_forward_value": {"reverse_kl_backward": reverse_kl_forward_value},
+        "reverse_kl_log_of_softmax": {"reverse_kl_backward": reverse_kl_log_of_softmax},
+    }
+)
+FIRST_FAILURE.update(
+    {
+        "reverse_kl_forward_gradient": r"gradient of KL\[π_old ‖ π\], not of KL\[π ‖ π_old\]",
+        "reverse_kl_without_the_mean": r"without subtracting KL",
+        "reverse_kl_forward_value": r"KL\[π_old ‖ π\], chapter 9's order",
+        "reverse_kl_log_of_softmax": r"logits of ±1000",
+    }
+)

@@ -527,3 +527,59 @@ ROLLOUT_MISTAKES = {
 }
 VARIANTS.update({name: {"collect": _variant(**switches)} for name, (switches, _) in ROLLOUT_MISTAKES.items()})
 FIRST_FAILURE.update({name: words for name, (_, words) in ROLLOUT_MISTAKES.items()})
+
+
+# the transfer task
+
+
+def _trunk_parts(features, policy_weights, value_weights, actions, logp_old, advantages, returns, epsilon):
+    n = len(actions)
+    logits = features @ policy_weights
+    log_probs = logits - np.log(np.exp(logits).sum(axis=1, keepdims=True))
+    clip_value, grad_logp = losses.clip_objective(log_probs[np.arange(n), actions], logp_old, advantages, epsilon)
+    score = -np.exp(log_probs)
+    score[np.arange(n), actions] += 1.0
+    error = features @ value_weights - returns
+    return clip_value, -score * grad_logp[:, None] @ policy_weights.T, error
+
+
+def trunk_policy_path_only(features, policy_weights, value_weights, actions, logp_old, advantages, returns, epsilon,
+                           value_coef):  # fmt: skip
+    """Only the policy head's gradient carried into h; the value head's path forgotten."""
+    clip_value, policy_grad, error = _trunk_parts(features, policy_weights, value_weights, actions, logp_old,
+                                                  advantages, returns, epsilon)  # fmt: skip
+    return -clip_value + value_coef * 0.5 * float(np.mean(error**2)), policy_grad
+
+
+def trunk_value_sign(features, policy_weights, value_weights, actions, logp_old, advantages, returns, epsilon,
+                     value_coef):  # fmt: skip
+    """The value path entered with the objective's sign, −c1, in a loss that adds c1 L^VF."""
+    clip_value, policy_grad, error = _trunk_parts(features, policy_weights, value_weights, actions, logp_old,
+                                                  advantages, returns, epsilon)  # fmt: skip
+    value_grad = -value_coef * error[:, None] * value_weights[None, :] / len(actions)
+    return -clip_value + value_coef * 0.5 * float(np.mean(error**2)), policy_grad + value_grad
+
+
+def trunk_value_without_half(features, policy_weights, value_weights, actions, logp_old, advantages, returns, epsilon,
+                             value_coef):  # fmt: skip
+    """The value path as the gradient of c1 Ê[(V − V^targ)²], without chapter 8's ½."""
+    clip_value, policy_grad, error = _trunk_parts(features, policy_weights, value_weights, actions, logp_old,
+                                                  advantages, returns, epsilon)  # fmt: skip
+    value_grad = 2 * value_coef * error[:, None] * value_weights[None, :] / len(actions)
+    return -clip_value + value_coef * 0.5 * float(np.mean(error**2)), policy_grad + value_grad
+
+
+VARIANTS.update(
+    {
+        "trunk_policy_path_only": {"shared_trunk_gradient": trunk_policy_path_only},
+        "trunk_value_sign": {"shared_trunk_gradient": trunk_value_sign},
+        "trunk_value_without_half": {"shared_trunk_gradient": trunk_value_without_half},
+    }
+)
+FIRST_FAILURE.update(
+    {
+        "trunk_policy_path_only": r"value head's gradient missing",
+        "trunk_value_sign": r"value term's sign flipped",
+        "trunk_value_without_half": r"without its ½",
+    }
+)

@@ -184,3 +184,72 @@ FIRST_FAILURE = {
     "backward_grad_K_mean_over_the_batch": r"grad_K .*n = 2 times too small everywhere",
     "backward_always_grad_x": r"need_grad_x=False, grad_x should be None",
 }
+
+
+# the transfer task
+
+
+def _pool_windows(x, size):
+    n, H, W, C = x.shape
+    return x.reshape(n, H // size, size, W // size, size, C)
+
+
+def pool_backward_average(x, size, grad_y):
+    """The gradient spread evenly over each window, as an average pool's backward pass."""
+    n, H, W, C = x.shape
+    spread = np.repeat(np.repeat(grad_y, size, axis=1), size, axis=2)
+    return spread / (size * size)
+
+
+def pool_backward_every_tie(x, size, grad_y):
+    """Every pixel equal to the window's maximum gets the gradient."""
+    windows = _pool_windows(x, size)
+    mask = windows == windows.max(axis=(2, 4), keepdims=True)
+    return (mask * grad_y[:, :, None, :, None, :]).reshape(x.shape).astype(np.float64)
+
+
+def pool_backward_transposed(x, size, grad_y):
+    """The argmax's flat index read back as (q, p) instead of (p, q)."""
+    n, H, W, C = x.shape
+    grad_x = np.zeros(x.shape)
+    for b in range(n):
+        for i in range(H // size):
+            for j in range(W // size):
+                for c in range(C):
+                    window = x[b, size * i : size * i + size, size * j : size * j + size, c]
+                    q, p = divmod(int(np.argmax(window)), size)
+                    grad_x[b, size * i + p, size * j + q, c] += grad_y[b, i, j, c]
+    return grad_x
+
+
+def pool_backward_last_tie(x, size, grad_y):
+    """At a tie, the gradient sent to the last maximum in row-major order."""
+    n, H, W, C = x.shape
+    grad_x = np.zeros(x.shape)
+    for b in range(n):
+        for i in range(H // size):
+            for j in range(W // size):
+                for c in range(C):
+                    window = x[b, size * i : size * i + size, size * j : size * j + size, c].reshape(-1)
+                    last = len(window) - 1 - int(np.argmax(window[::-1]))
+                    p, q = divmod(last, size)
+                    grad_x[b, size * i + p, size * j + q, c] += grad_y[b, i, j, c]
+    return grad_x
+
+
+VARIANTS.update(
+    {
+        "pool_backward_average": {"max_pool2d_backward": pool_backward_average},
+        "pool_backward_every_tie": {"max_pool2d_backward": pool_backward_every_tie},
+        "pool_backward_transposed": {"max_pool2d_backward": pool_backward_transposed},
+        "pool_backward_last_tie": {"max_pool2d_backward": pool_backward_last_tie},
+    }
+)
+FIRST_FAILURE.update(
+    {
+        "pool_backward_average": r"spread evenly",
+        "pool_backward_every_tie": r"every pixel that ties",
+        "pool_backward_transposed": r"p and q swapped",
+        "pool_backward_last_tie": r"to the last of them",
+    }
+)

@@ -119,3 +119,74 @@ FIRST_FAILURE = {
     "rewards_beta_on_the_score": r"its last token, t = length − 1.*R\(x\) = 3, β = 0\.5\): got 1\.5, expected 3",
     "rewards_score_by_column_index": r"sequence \d of length \d, token t = \d",
 }
+
+
+# the transfer task
+
+
+def pl_all_pairs(scores):
+    """Bradley–Terry on every pair (i ranked above j), not one choice after another."""
+    n, K = scores.shape
+    loss, grad = 0.0, np.zeros(scores.shape)
+    for i in range(K):
+        for j in range(i + 1, K):
+            margin = scores[:, i] - scores[:, j]
+            loss += float(np.logaddexp(0.0, -margin).sum())
+            wrong = np.exp(-np.logaddexp(0.0, margin))
+            grad[:, i] -= wrong
+            grad[:, j] += wrong
+    return loss / n, grad / n
+
+
+def pl_full_softmax(scores):
+    """Each choice's softmax over all K responses, the ones already chosen included."""
+    n, K = scores.shape
+    log_norm = np.logaddexp.reduce(scores, axis=1)
+    loss = float(np.sum((K - 1) * log_norm - scores[:, : K - 1].sum(axis=1)))
+    grad = (K - 1) * np.exp(scores - log_norm[:, None])
+    grad[:, : K - 1] -= 1.0
+    return loss / n, grad / n
+
+
+def pl_naive_exp(scores):
+    """The softmax's normaliser as np.log(np.sum(np.exp(...))): infinite for scores of 1000."""
+    n, K = scores.shape
+    loss, grad = 0.0, np.zeros(scores.shape)
+    with np.errstate(over="ignore", invalid="ignore"):
+        for i in range(K - 1):
+            rest = np.exp(scores[:, i:])
+            norm = rest.sum(axis=1)
+            loss += float(np.sum(np.log(norm) - scores[:, i]))
+            grad[:, i:] += rest / norm[:, None]
+            grad[:, i] -= 1.0
+    return loss / n, grad / n
+
+
+def pl_summed(scores):
+    """Summed over the rankings instead of averaged."""
+    n, K = scores.shape
+    loss, grad = 0.0, np.zeros(scores.shape)
+    for i in range(K - 1):
+        log_norm = np.logaddexp.reduce(scores[:, i:], axis=1)
+        loss += float(np.sum(log_norm - scores[:, i]))
+        grad[:, i:] += np.exp(scores[:, i:] - log_norm[:, None])
+        grad[:, i] -= 1.0
+    return loss, grad
+
+
+VARIANTS.update(
+    {
+        "pl_all_pairs": {"plackett_luce_loss": pl_all_pairs},
+        "pl_full_softmax": {"plackett_luce_loss": pl_full_softmax},
+        "pl_naive_exp": {"plackett_luce_loss": pl_naive_exp},
+        "pl_summed": {"plackett_luce_loss": pl_summed},
+    }
+)
+FIRST_FAILURE.update(
+    {
+        "pl_all_pairs": r"every pair, not one choice after another",
+        "pl_full_softmax": r"ones already chosen included",
+        "pl_naive_exp": r"scores of ±1000",
+        "pl_summed": r"K = 2 .*(8 times|n times)",
+    }
+)

@@ -198,3 +198,55 @@ FIRST_FAILURE = {
     "dpo_log_of_sigmoid": r"±1000",
     "dpo_gradient_on_preferred_only": r"the rejected response is a variable too",
 }
+
+
+# the transfer task
+
+
+def _ipo_gap(logp_preferred, logp_rejected, ref_preferred, ref_rejected, tau):
+    return (logp_preferred - ref_preferred) - (logp_rejected - ref_rejected) - 1.0 / (2.0 * tau)
+
+
+def ipo_without_factor_two(logp_preferred, logp_rejected, ref_preferred, ref_rejected, tau):
+    """The square's derivative taken without its factor 2."""
+    gap = _ipo_gap(logp_preferred, logp_rejected, ref_preferred, ref_rejected, tau)
+    n = len(gap)
+    return float(np.mean(gap * gap)), gap / n, -gap / n
+
+
+def ipo_same_sign(logp_preferred, logp_rejected, ref_preferred, ref_rejected, tau):
+    """The rejected response's gradient with the preferred one's sign."""
+    gap = _ipo_gap(logp_preferred, logp_rejected, ref_preferred, ref_rejected, tau)
+    n = len(gap)
+    return float(np.mean(gap * gap)), 2 * gap / n, 2 * gap / n
+
+
+def ipo_target_one_over_tau(logp_preferred, logp_rejected, ref_preferred, ref_rejected, tau):
+    """The target 1/τ instead of 1/(2τ)."""
+    gap = _ipo_gap(logp_preferred, logp_rejected, ref_preferred, ref_rejected, tau) - 1.0 / (2.0 * tau)
+    n = len(gap)
+    return float(np.mean(gap * gap)), 2 * gap / n, -2 * gap / n
+
+
+def ipo_summed(logp_preferred, logp_rejected, ref_preferred, ref_rejected, tau):
+    """Summed over the pairs: loss and gradients."""
+    gap = _ipo_gap(logp_preferred, logp_rejected, ref_preferred, ref_rejected, tau)
+    return float(np.sum(gap * gap)), 2 * gap, -2 * gap
+
+
+VARIANTS.update(
+    {
+        "ipo_without_factor_two": {"ipo_loss": ipo_without_factor_two},
+        "ipo_same_sign": {"ipo_loss": ipo_same_sign},
+        "ipo_target_one_over_tau": {"ipo_loss": ipo_target_one_over_tau},
+        "ipo_summed": {"ipo_loss": ipo_summed},
+    }
+)
+FIRST_FAILURE.update(
+    {
+        "ipo_without_factor_two": r"without its factor 2",
+        "ipo_same_sign": r"with the same sign",
+        "ipo_target_one_over_tau": r"target 1/τ",
+        "ipo_summed": r"the loss, τ = 0\.1.*a sum over the batch",
+    }
+)
