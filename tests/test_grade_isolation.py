@@ -301,7 +301,8 @@ def test_the_worker_cannot_import_the_reference_or_reach_the_repository(tmp_path
             import solutions
         """,
     )
-    box = sandbox.Sandbox(folder)
+    # a class folder inside the clone (``--class submissions/`` run from it) is hidden with it
+    box = sandbox.Sandbox(folder, hide=[ROOT / "tests" / "exercises"])
     try:
         assert box.isolation == isolation
         assert box.load("ch05_clipping") is None
@@ -645,3 +646,33 @@ def test_one_exercise_may_import_another_as_in_the_repository(tmp_path):
         assert box.call("ch06_the_min", "g", (3,), {}) == 7
     finally:
         box.close()
+
+
+def test_a_student_the_grader_could_not_run_is_not_graded_rather_than_given_zero(tmp_path, monkeypatch, capsys):
+    """When the grader's worker does not start, the class's CSV says "not graded" with the grader's reason, the run
+    exits 1, and a single student's ``minippo grade`` says the same in one line instead of a scoreboard of zeros."""
+    from minippo.errors import MinippoError
+    from minippo.grading import grade
+
+    failure = "the grader could not start the process that runs the student's code: it was not found"
+
+    def broken_run(impl, files, integrity=None, **kwargs):
+        integrity["grader_error"] = [failure]
+        nodeid = "tests/exercises/test_ch05_clipping.py::test_x"
+        return [nodeid], [Result(nodeid, "failed", "the test crashed: " + failure)], ""
+
+    monkeypatch.setattr(grade, "run_tests", broken_run)
+    for name in ("alice", "bob"):
+        (tmp_path / "class" / name).mkdir(parents=True)
+        (tmp_path / "class" / name / "ch05_clipping.py").write_text(SOLUTION)
+    out = tmp_path / "grades.csv"
+    assert grade.grade_class(str(tmp_path / "class"), "5", csv_path=str(out)) == 1
+    with open(out, newline="", encoding="utf-8") as handle:
+        rows = list(csv.DictReader(handle))
+    assert [(r["student"], r["passed"], r["first_failure"]) for r in rows] == [
+        ("alice", "not graded", failure),
+        ("bob", "not graded", failure),
+    ]
+    assert "2 of 2 students not graded" in capsys.readouterr().out
+    with pytest.raises(MinippoError, match="^not graded: the grader could not start"):
+        grade.grade("5", impl=str(tmp_path / "class" / "alice"))
