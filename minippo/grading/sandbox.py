@@ -273,7 +273,7 @@ class Sandbox:
         (lib / "exercises" / "__init__.py").write_text(f"__path__ = [{str(student)!r}]\n", encoding="utf-8")
         run.mkdir()
         hidden = self._hidden()
-        kept = [p for p in interpreter_paths() if any(p.is_relative_to(h) for h in hidden)]
+        kept = [p for p in interpreter_paths() if any(under(p, h) for h in hidden)]
         from_judge, to_worker = os.pipe()  # (read end, write end)
         from_worker, to_judge = os.pipe()
         # -B: no bytecode written into the interpreter's folders, which the worker may only read
@@ -385,12 +385,11 @@ class Sandbox:
         """The folders to cover in the worker's mount namespace, resolved: those that exist, do not hold the worker's
         own folder and are not inside another one (covered with it)."""
         found: list[Path] = []
-        own = Path(os.path.realpath(self.workdir))
         for path in self.hide:
             real = Path(os.path.realpath(path))
-            if real.is_dir() and real != Path("/") and real not in found and not own.is_relative_to(real):
+            if real.is_dir() and real != Path("/") and real not in found and not under(self.workdir, real):
                 found.append(real)
-        return [p for p in found if not any(p != q and p.is_relative_to(q) for q in found)]
+        return [p for p in found if not any(p != q and under(p, q) for q in found)]
 
     def alive(self) -> bool:
         return self.process is not None and self.process.poll() is None
