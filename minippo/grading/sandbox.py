@@ -159,9 +159,10 @@ def under(path, root) -> bool:
 
 def interpreter_paths() -> list[Path]:
     """What the running interpreter needs to start and import its packages, resolved and none inside another: the
-    folder of its executable (as called and as resolved), its venv's pyvenv.cfg, its standard library and shared
-    library folder, and its package folders (site-packages, where the editable install's finder lives) for its prefix
-    and base prefix. A worker is started with the same interpreter, so none of these may be hidden from it."""
+    folder of its executable (as called and as resolved), its venv's pyvenv.cfg, its standard library, its package
+    folders (site-packages, where the editable install's finder lives) and its prefixes' lib folders (shared
+    libraries), for its prefix and base prefix. A worker is started with the same interpreter, so none of these may be
+    hidden from it; nothing else of a prefix is kept (its include, share, etc)."""
     found = [os.path.dirname(sys.executable), os.path.dirname(os.path.realpath(sys.executable))]
     prefixes = dict.fromkeys([sys.prefix, sys.exec_prefix, sys.base_prefix, sys.base_exec_prefix])
     found += [os.path.join(prefix, "pyvenv.cfg") for prefix in prefixes]
@@ -170,6 +171,9 @@ def interpreter_paths() -> list[Path]:
         paths = sysconfig.get_paths(vars=variables)
         found += [paths[name] for name in names if name in paths]
     found += [sysconfig.get_config_var("LIBDIR") or "", *site.getsitepackages()]
+    # a conda prefix's shared libraries (libpython, the BLAS NumPy links to) sit in its lib folder, which the build's
+    # LIBDIR names only once conda has rewritten it
+    found += [os.path.join(prefix, lib) for prefix in prefixes for lib in ("lib", "lib64")]
     resolved = []
     for path in found:
         if path and os.path.exists(path):
