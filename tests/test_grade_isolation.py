@@ -337,7 +337,8 @@ def test_an_interpreter_inside_a_hidden_folder_keeps_exactly_what_it_needs(tmp_p
     course) leaves its executable, standard library and packages readable and nothing else of the prefix."""
     prefix = Path(sys.prefix).resolve()
     kept = sandbox.interpreter_paths()
-    others = sorted(p for p in prefix.iterdir() if p.is_dir() and not any(p.is_relative_to(k) for k in kept))
+    folders = {p.resolve() for p in prefix.iterdir() if p.is_dir()}  # a venv's lib64 is its lib
+    others = sorted(p for p in folders if not any(p.is_relative_to(k) for k in kept))
     site_packages = next(p for p in map(Path, site.getsitepackages()) if p.resolve().is_relative_to(prefix))
     folder = make_folder(
         tmp_path,
