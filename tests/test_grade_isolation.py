@@ -290,9 +290,10 @@ def test_the_worker_cannot_import_the_reference_or_reach_the_repository(tmp_path
         import os, sys
         from pathlib import Path
 
-        def where():  # as paths: an environment in /x/course-venv beside /x/course is not inside it
+        def where(kept):  # as paths: an environment in /x/course-venv beside /x/course is not inside it
             root = Path({str(ROOT)!r}).resolve()
-            return [p for p in sys.path if Path(p or ".").resolve().is_relative_to(root)]
+            inside = [Path(p or ".").resolve() for p in sys.path if Path(p or ".").resolve().is_relative_to(root)]
+            return [str(p) for p in inside if not any(p.is_relative_to(k) for k in kept)]
 
         def read():
             return open({str(ROOT / "README.md")!r}).read()
@@ -306,7 +307,9 @@ def test_the_worker_cannot_import_the_reference_or_reach_the_repository(tmp_path
     try:
         assert box.isolation == isolation
         assert box.load("ch05_clipping") is None
-        assert box.call("ch05_clipping", "where", (), {}) == []
+        # nothing of the course on the worker's path but the interpreter's own packages (a .venv inside the clone)
+        kept = [str(p) for p in sandbox.interpreter_paths()]
+        assert box.call("ch05_clipping", "where", (kept,), {}) == []
         for name in ("read", "import_solutions"):
             with pytest.raises(sandbox.StudentRaised):
                 box.call("ch05_clipping", name, (), {})
