@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import site
 import subprocess
 import sys
 import textwrap
@@ -269,14 +270,30 @@ def test_the_worker_calls_a_judge_object_itself_only_where_its_class_offers_call
         box.close()
 
 
-def test_the_worker_cannot_import_the_reference_or_reach_the_repository(tmp_path):
+@pytest.fixture(params=["namespaces", "process"])
+def isolation(request, monkeypatch):
+    """Each way the grader keeps a worker apart: its own mount and PID namespaces (root with unshare), and a plain
+    process with the worker's guard (an ordinary user; forced here with MINIPPO_GRADE_NO_NAMESPACES)."""
+    if request.param == "namespaces":
+        if not sandbox.namespaces_available():
+            pytest.skip("no mount and PID namespaces on this machine (they need root, unshare and setpriv)")
+        monkeypatch.delenv("MINIPPO_GRADE_NO_NAMESPACES", raising=False)
+    else:
+        monkeypatch.setenv("MINIPPO_GRADE_NO_NAMESPACES", "1")
+    return request.param
+
+
+def test_the_worker_cannot_import_the_reference_or_reach_the_repository(tmp_path, isolation):
     folder = make_folder(
         tmp_path,
         f"""
         import os, sys
+        from pathlib import Path
 
-        def where():
-            return [p for p in sys.path if p.startswith({str(ROOT)!r})]
+        def where(kept):  # as paths: an environment in /x/course-venv beside /x/course is not inside it
+            root = Path({str(ROOT)!r}).resolve()
+            inside = [Path(p or ".").resolve() for p in sys.path if Path(p or ".").resolve().is_relative_to(root)]
+            return [str(p) for p in inside if not any(p.is_relative_to(k) for k in kept)]
 
         def read():
             return open({str(ROOT / "README.md")!r}).read()
@@ -285,16 +302,159 @@ def test_the_worker_cannot_import_the_reference_or_reach_the_repository(tmp_path
             import solutions
         """,
     )
-    box = sandbox.Sandbox(folder)
+    # a class folder inside the clone (``--class submissions/`` run from it) is hidden with it
+    box = sandbox.Sandbox(folder, hide=[ROOT / "tests" / "exercises"])
     try:
+        assert box.isolation == isolation
         assert box.load("ch05_clipping") is None
-        assert box.call("ch05_clipping", "where", (), {}) == []
+        # nothing of the course on the worker's path but the interpreter's own packages (a .venv inside the clone)
+        kept = [str(p) for p in sandbox.interpreter_paths()]
+        assert box.call("ch05_clipping", "where", (kept,), {}) == []
         for name in ("read", "import_solutions"):
             with pytest.raises(sandbox.StudentRaised):
                 box.call("ch05_clipping", name, (), {})
         assert any("README.md" in note or "solutions" in note for note in box.notes), box.notes
     finally:
         box.close()
+
+
+def test_paths_are_compared_as_paths_not_as_strings(tmp_path):
+    (tmp_path / "course").mkdir()
+    (tmp_path / "course-venv").mkdir()
+    assert sandbox.under(tmp_path / "course" / "x", tmp_path / "course")
+    assert not sandbox.under(tmp_path / "course-venv", tmp_path / "course")
+    hidden = worker_module().guarded([str(tmp_path / "course")], [str(tmp_path / "course" / ".venv")])
+    assert hidden(str(tmp_path / "course" / "solutions")) and not hidden(str(tmp_path / "course-venv" / "lib"))
+    assert not hidden(str(tmp_path / "course" / ".venv" / "lib")) and hidden(str(tmp_path / "course" / ".venv"), True)
+
+
+def worker_module():
+    from minippo.grading import worker
+
+    return worker
+
+
+@pytest.mark.skipif(os.path.realpath(sys.prefix) in ("/", "/usr", "/usr/local"), reason="a system-wide Python")
+def test_an_interpreter_inside_a_hidden_folder_keeps_exactly_what_it_needs(tmp_path, isolation):
+    """Hiding the interpreter's own prefix (as a .venv or a conda environment inside the clone is hidden with the
+    course) leaves its executable, standard library and packages readable and nothing else of the prefix."""
+    prefix = Path(sys.prefix).resolve()
+    kept = sandbox.interpreter_paths()
+    folders = {p.resolve() for p in prefix.iterdir() if p.is_dir()}  # a venv's lib64 is its lib
+    others = sorted(p for p in folders if not any(p.is_relative_to(k) for k in kept))
+    site_packages = next(p for p in map(Path, site.getsitepackages()) if p.resolve().is_relative_to(prefix))
+    folder = make_folder(
+        tmp_path,
+        """
+        import os
+        import numpy as np
+
+        def norm(x):
+            return float(np.linalg.norm(x))
+
+        def listing(path):
+            return len(os.listdir(path))
+
+        def write(path):
+            with open(path, "w") as handle:
+                handle.write("x")
+        """,
+    )
+    box = sandbox.Sandbox(folder, hide=[prefix])
+    try:
+        assert box.load("ch05_clipping") is None
+        assert box.call("ch05_clipping", "norm", (np.array([3.0, 4.0]),), {}) == 5.0
+        assert box.call("ch05_clipping", "listing", (str(site_packages),), {}) > 0  # read-only, but there
+        for other in others[:3]:  # the prefix's folders the interpreter does not need stay hidden
+            with pytest.raises(sandbox.StudentRaised):
+                box.call("ch05_clipping", "listing", (str(other),), {})
+        with pytest.raises(sandbox.StudentRaised):
+            box.call("ch05_clipping", "write", (str(site_packages / "minippo-written-by-a-worker.txt"),), {})
+        assert not (site_packages / "minippo-written-by-a-worker.txt").exists()
+    finally:
+        (site_packages / "minippo-written-by-a-worker.txt").unlink(missing_ok=True)
+        box.close()
+
+
+LAYOUT_SCRIPT = """
+import sys
+from pathlib import Path
+import numpy as np
+from minippo.grading import sandbox
+course, folder = Path(sys.argv[1]), Path(sys.argv[2])
+box = sandbox.Sandbox(folder, hide=[course])
+try:
+    assert box.load("ch05_clipping") is None
+    print(box.isolation, box.call("ch05_clipping", "norm", (np.array([3.0, 4.0]),), {}),
+          box.call("ch05_clipping", "secret", (str(course / "secret.txt"),), {}))
+finally:
+    box.close()
+"""
+
+
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize("layout", ["venv_inside", "venv_beside_sharing_a_prefix"])
+def test_a_virtual_environment_inside_or_beside_the_course_grades_the_same(tmp_path, isolation, layout):
+    """The layouts students make: ``python -m venv .venv`` inside the clone (uv's, PDM's, VS Code's default), or an
+    environment beside it whose name starts with the clone's (/x/course-venv). The worker starts, runs NumPy, and
+    cannot read the course's files."""
+    course = tmp_path / "course"
+    course.mkdir()
+    (course / "secret.txt").write_text("the course's own file")
+    environment = course / ".venv" if layout == "venv_inside" else tmp_path / "course-venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", "--system-site-packages", str(environment)],
+                   check=True, timeout=120)  # fmt: skip
+    (tmp_path / "student").mkdir()
+    folder = make_folder(
+        tmp_path / "student",
+        """
+        import numpy as np
+
+        def norm(x):
+            return float(np.linalg.norm(x))
+
+        def secret(path):
+            try:
+                return open(path).read()
+            except OSError as error:
+                return type(error).__name__
+        """,
+    )
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    python = str(environment / "bin" / "python")
+    # the new environment sees the base interpreter's packages (not those of an environment this test runs in)
+    ready = subprocess.run([python, "-c", "import numpy, minippo.grading.sandbox"], capture_output=True, env=env)
+    if ready.returncode != 0:
+        pytest.skip("the base interpreter has no NumPy or minippo's dependencies (.ci/grade-layouts covers this case)")
+    done = subprocess.run([python, "-c", LAYOUT_SCRIPT, str(course), str(folder)],
+                          capture_output=True, text=True, timeout=240, env=env)  # fmt: skip
+    assert done.returncode == 0, done.stdout + done.stderr
+    shown, norm, secret = done.stdout.split()
+    assert (shown, norm) == (isolation, "5.0") and secret in ("FileNotFoundError", "PermissionError"), done.stdout
+
+
+def test_a_worker_that_cannot_start_is_the_grader_s_error_not_the_student_s(tmp_path, isolation, monkeypatch):
+    from minippo.grading import plugin, supervisor
+
+    log = tmp_path / "log.jsonl"
+    monkeypatch.setenv(plugin.LOG_VARIABLE, str(log))
+    (tmp_path / "student").mkdir()
+    folder = make_folder(tmp_path / "student", "x = 1\n")
+    monkeypatch.setattr(sys, "executable", str(tmp_path / "no-such-python"))  # an interpreter the worker cannot find
+    box = sandbox.Sandbox(folder)
+    try:
+        with pytest.raises(sandbox.GraderError) as raised:
+            box.load("ch05_clipping")
+        text = str(raised.value)
+        assert "the grader could not start" in text and "not the submission's" in text, text
+        assert "sys.exit" not in text, text
+        with pytest.raises(sandbox.GraderError):  # every later start says the same, without trying again
+            box.start()
+    finally:
+        box.close()
+    integrity: dict = {}
+    supervisor._read_log(log, {}, plugin._key, integrity)
+    assert supervisor.grader_error(integrity) == text  # the supervisor reads it from the grader's log
 
 
 def test_the_source_scan_names_the_library_s_answer_and_the_reference(tmp_path):
@@ -495,3 +655,33 @@ def test_one_exercise_may_import_another_as_in_the_repository(tmp_path):
         assert box.call("ch06_the_min", "g", (3,), {}) == 7
     finally:
         box.close()
+
+
+def test_a_student_the_grader_could_not_run_is_not_graded_rather_than_given_zero(tmp_path, monkeypatch, capsys):
+    """When the grader's worker does not start, the class's CSV says "not graded" with the grader's reason, the run
+    exits 1, and a single student's ``minippo grade`` says the same in one line instead of a scoreboard of zeros."""
+    from minippo.errors import MinippoError
+    from minippo.grading import grade
+
+    failure = "the grader could not start the process that runs the student's code: it was not found"
+
+    def broken_run(impl, files, integrity=None, **kwargs):
+        integrity["grader_error"] = [failure]
+        nodeid = "tests/exercises/test_ch05_clipping.py::test_x"
+        return [nodeid], [Result(nodeid, "failed", "the test crashed: " + failure)], ""
+
+    monkeypatch.setattr(grade, "run_tests", broken_run)
+    for name in ("alice", "bob"):
+        (tmp_path / "class" / name).mkdir(parents=True)
+        (tmp_path / "class" / name / "ch05_clipping.py").write_text(SOLUTION)
+    out = tmp_path / "grades.csv"
+    assert grade.grade_class(str(tmp_path / "class"), "5", csv_path=str(out)) == 1
+    with open(out, newline="", encoding="utf-8") as handle:
+        rows = list(csv.DictReader(handle))
+    assert [(r["student"], r["passed"], r["first_failure"]) for r in rows] == [
+        ("alice", "not graded", failure),
+        ("bob", "not graded", failure),
+    ]
+    assert "2 of 2 students not graded" in capsys.readouterr().out
+    with pytest.raises(MinippoError, match="^not graded: the grader could not start"):
+        grade.grade("5", impl=str(tmp_path / "class" / "alice"))

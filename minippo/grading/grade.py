@@ -28,8 +28,10 @@ from minippo.errors import MinippoError
 from minippo.grading.chapters import chapter_files, chapter_title, chapters_to_grade
 from minippo.grading.gradescope import gradescope_results
 from minippo.grading.reports import CSV_FIELDS, chapter_score, csv_cell, failures_in_detail, integrity_notes, scoreboard
-from minippo.grading.supervisor import IMPL_VARIABLE, RUN_LIMIT_S, run_tests
+from minippo.grading.supervisor import IMPL_VARIABLE, RUN_LIMIT_S, grader_error, run_tests
 from minippo.records import write_atomically
+
+NOT_GRADED = "not graded"  # a class's passed cell when the grader could not run the student's code
 
 
 def _require_pytest_timeout() -> None:
@@ -83,6 +85,9 @@ def grade(
     integrity: dict = {}
     hide = [Path(gradescope).expanduser().resolve()] if gradescope is not None else []
     _, results, note = run_tests(impl, [files[n] for n in numbers], integrity=integrity, hide=hide)
+    failure = grader_error(integrity)
+    if failure:  # nothing was graded: no scoreboard of zeros that blames the code
+        raise MinippoError(f"not graded: {failure}")
     lines, all_passed = scoreboard(results, numbers)
     print("\n".join(lines), file=out)
     if note:
@@ -110,8 +115,10 @@ def grade_class(
     """Grade every student of a class: each sub-folder of ``folder`` holds one student's chNN_*.py modules. Each
     student's code runs in its own child process under the same per-test time limits (and ``limit_s`` for the whole
     student), so an endless loop or a crash costs only that student's line. Writes one CSV row per student and
-    chapter (student, chapter, passed, total, first_failure) to ``csv_path`` and prints the same as a table.
-    Returns 0 once every student is graded; raises MinippoError for bad input."""
+    chapter (student, chapter, passed, total, first_failure) to ``csv_path`` and prints the same as a table. A student
+    whose code the grader could not run (its worker did not start: the grader's failure) is marked "not graded", with
+    the reason, rather than 0. Returns 0 once every student is graded, 1 if one was not; raises MinippoError for bad
+    input."""
     out = out or sys.stdout
     root = Path(folder).expanduser()
     if not root.is_dir():
@@ -127,7 +134,7 @@ def grade_class(
     print(
         f"Grading {len(students)} students in {folder} (chapter {', '.join(map(str, numbers))}).", file=out, flush=True
     )
-    rows = []
+    rows, not_graded = [], []
     hidden = [root.resolve()] + ([Path(csv_path).expanduser().resolve()] if csv_path is not None else [])
     width = max(len(s.name) for s in students + [Path("student")])
     print(f"{'student':<{width}}  {'chapter':<22}  {'passed':>7}  first failure", file=out, flush=True)
@@ -136,17 +143,23 @@ def grade_class(
         _, results, note = run_tests(
             str(student.resolve()), [files[n] for n in numbers], limit_s=limit_s, integrity=integrity, hide=hidden
         )
+        failure = grader_error(integrity)
+        if failure:
+            not_graded.append(student.name)
         for number in numbers:
             score = chapter_score(results, number)
             comment = "" if score.all_passed else score.summary
             if note and not score.total:
                 comment = note
+            if failure:
+                comment = failure
             notes = "; ".join(integrity_notes(integrity, number))
-            row = {"student": csv_cell(student.name), "chapter": number, "passed": score.passed, "total": score.total,
+            passed = NOT_GRADED if failure else score.passed
+            row = {"student": csv_cell(student.name), "chapter": number, "passed": passed, "total": score.total,
                    "first_failure": csv_cell(comment), "integrity": csv_cell(notes),
                    "isolation": integrity.get("isolation", "none")}  # fmt: skip
             rows.append(row)
-            fraction = f"{score.passed}/{score.total}"
+            fraction = NOT_GRADED if failure else f"{score.passed}/{score.total}"
             shown = " ".join(comment.split())
             shown = shown if len(shown) <= 100 else shown[:97] + "..."
             shown = shown or "all passed"
@@ -161,4 +174,7 @@ def grade_class(
         writer.writerows(rows)
         write_atomically(Path(csv_path).expanduser(), lambda handle: handle.write(table.getvalue().encode("utf-8")))
         print(f"Wrote {len(rows)} rows to {csv_path}.", file=out)
+    if not_graded:
+        print(f"{len(not_graded)} of {len(students)} students not graded, by the grader's error above.", file=out)
+        return 1
     return 0

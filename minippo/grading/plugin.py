@@ -47,6 +47,12 @@ def log_integrity(chapter: str, note: str | None, isolation: str | None = None) 
     _log({"integrity": chapter, "note": note, "isolation": isolation})
 
 
+def log_grader_error(text: str) -> None:
+    """Record that the grader itself could not run the student's code (its worker did not start): the student is
+    not graded, rather than given 0 (minippo.grading.supervisor reads it)."""
+    _log({"grader_error": text})
+
+
 def pytest_collection_modifyitems(items) -> None:
     """Under MINIPPO_GRADE_TIME_FACTOR, every test's time limit times that factor: a student's code runs in a worker
     process, and each of its calls costs a round trip there and back (a test may make a thousand)."""

@@ -4,7 +4,11 @@
 ``python -I worker.py`` there, with the process limits below (CPU seconds, address space, file size, processes) and,
 where Linux namespaces are available (``unshare`` as root), its own mount and PID namespaces in which the course's
 repository, the class folder and the grader's files are covered by empty file systems and every capability is
-dropped. ``call(name, args, kwargs)`` runs one of the module's functions there and returns its result; the tests that
+dropped. The running interpreter is never hidden: where its folders (a ``.venv`` inside the clone, a conda prefix)
+lie inside a hidden folder, exactly those (``interpreter_paths``) are mounted back, read-only. A worker that cannot
+start is the grader's failure (``GraderError``), never the student's.
+
+``call(name, args, kwargs)`` runs one of the module's functions there and returns its result; the tests that
 judge it, their verdict and the grader's log never leave this process.
 
 What the worker may reach of the judge's objects (an agent, an optimizer, a config) is what their classes offer (see
@@ -24,8 +28,10 @@ import os
 import select
 import shutil
 import signal
+import site
 import subprocess
 import sys
+import sysconfig
 import tempfile
 from pathlib import Path
 
@@ -35,6 +41,7 @@ from minippo.agent import ActorCritic
 from minippo.config import Config
 from minippo.distributions import Categorical, DiagGaussian
 from minippo.grading.chapters import course
+from minippo.grading.plugin import log_grader_error, plain_exception
 from minippo.grading.worker import WireError, arrays_in, pack, read_frame, unpack, write_frame
 from minippo.network import MLP
 from minippo.optimizer import Adam
@@ -93,6 +100,19 @@ class WorkerDied(Exception):
     """The worker ended (or broke the protocol) during a call."""
 
 
+@plain_exception
+class GraderError(Exception):
+    """The grader could not run the student's code at all (the worker did not start, or cannot read its own
+    interpreter): the grader's failure, not the student's. Its message says what to do."""
+
+
+STARTUP_S = 120  # how long a worker may take to say it is running before the grader gives up on it
+WHAT_TO_DO = (
+    "this is the grader's fault, not the submission's: run `minippo grade` again with MINIPPO_GRADE_NO_NAMESPACES=1, "
+    "and report this line with `python -c \"import sys; print(sys.executable, sys.prefix)\"` to the course"
+)
+
+
 class StudentObject:
     """Stands in for an object of the student's that stays in the worker (it can only be passed back)."""
 
@@ -132,13 +152,67 @@ def isolation() -> str:
     return "namespaces"
 
 
-# the mounts, in the worker's own namespaces: each folder to hide gets an empty read-only file system over it
-HIDE_SCRIPT = """
-n=$1; shift
-while [ "$n" -gt 0 ]; do
-    mount -t tmpfs -o ro,size=4k,mode=0555 minippo-hidden "$1" || exit 97
-    shift; n=$((n - 1))
+def under(path, root) -> bool:
+    """Whether ``path`` is ``root`` or inside it, both resolved (as paths: /x/course-venv is not inside /x/course)."""
+    return Path(os.path.realpath(path)).is_relative_to(os.path.realpath(root))
+
+
+def interpreter_paths() -> list[Path]:
+    """What the running interpreter needs to start and import its packages, resolved and none inside another: the
+    folder of its executable (as called and as resolved), its venv's pyvenv.cfg, its standard library, its package
+    folders (site-packages, where the editable install's finder lives) and its prefixes' lib folders (shared
+    libraries), for its prefix and base prefix. A worker is started with the same interpreter, so none of these may be
+    hidden from it; nothing else of a prefix is kept (its include, share, etc)."""
+    found = [os.path.dirname(sys.executable), os.path.dirname(os.path.realpath(sys.executable))]
+    prefixes = dict.fromkeys([sys.prefix, sys.exec_prefix, sys.base_prefix, sys.base_exec_prefix])
+    found += [os.path.join(prefix, "pyvenv.cfg") for prefix in prefixes]
+    names = ("stdlib", "platstdlib", "purelib", "platlib")
+    for variables in ({}, {"base": sys.base_prefix, "platbase": sys.base_exec_prefix}):
+        paths = sysconfig.get_paths(vars=variables)
+        found += [paths[name] for name in names if name in paths]
+    found += [sysconfig.get_config_var("LIBDIR") or "", *site.getsitepackages()]
+    # a conda prefix's shared libraries (libpython, the BLAS NumPy links to) sit in its lib folder, which the build's
+    # LIBDIR names only once conda has rewritten it
+    found += [os.path.join(prefix, lib) for prefix in prefixes for lib in ("lib", "lib64")]
+    resolved = []
+    for path in found:
+        if path and os.path.exists(path):
+            real = Path(os.path.realpath(path))
+            if real not in resolved:
+                resolved.append(real)
+    return [p for p in resolved if not any(p != q and p.is_relative_to(q) for q in resolved)]
+
+
+# the mounts, in the worker's own namespaces: each folder to hide gets an empty read-only file system over it, and the
+# interpreter's own paths inside it (kept) are mounted back read-only. A kept path is first bound to a place in the
+# worker's own folder (stage), since it cannot be reached once its hidden folder is covered.
+HIDE_SCRIPT = r"""
+stage=$1; n=$2; k=$3; shift 3
+i=1; while [ "$i" -le "$k" ]; do
+    eval "kept=\${$((n + i))}"
+    if [ -d "$kept" ]; then mkdir "$stage/$i"; else : > "$stage/$i"; fi
+    mount --bind "$kept" "$stage/$i" || exit 97
+    i=$((i + 1))
 done
+i=1; while [ "$i" -le "$n" ]; do
+    eval "hidden=\${$i}"
+    mount -t tmpfs -o size=64k,mode=0555 minippo-hidden "$hidden" || exit 97
+    i=$((i + 1))
+done
+i=1; while [ "$i" -le "$k" ]; do
+    eval "kept=\${$((n + i))}"
+    if [ -d "$stage/$i" ]; then mkdir -p "$kept"; else mkdir -p "$(dirname "$kept")" && : > "$kept"; fi || exit 97
+    mount --bind "$stage/$i" "$kept" && mount -o remount,bind,ro "$kept" || exit 97
+    umount "$stage/$i" && rm -d "$stage/$i" || exit 97
+    i=$((i + 1))
+done
+i=1; while [ "$i" -le "$n" ]; do
+    eval "hidden=\${$i}"
+    mount -o remount,ro "$hidden" || exit 97
+    i=$((i + 1))
+done
+rmdir "$stage" || exit 97
+shift $((n + k))
 setpriv --bounding-set=-all --inh-caps=-all --no-new-privs "$@"
 exit $?
 """  # not exec: the shell stays as the namespace's first process and says how the worker ended (128 + a signal)
@@ -181,11 +255,16 @@ class Sandbox:
         self._callable: set[int] = set()
         self._mirrored: dict[tuple[int, str], np.ndarray] = {}
         self._fresh = False
+        self.broken: str | None = None  # the grader's own failure to start a worker, once seen (every start repeats it)
         _ALL.append(self)
 
     # the process
     def start(self) -> None:
-        """Start a worker (raises WorkerDied if it cannot even begin)."""
+        """Start a worker and wait until it runs. Raises GraderError if it cannot: the grader's failure (its interpreter
+        cannot be reached, the namespaces cannot be set up), reported as such and never blamed on the student's code,
+        which has not run yet."""
+        if self.broken:
+            raise GraderError(self.broken)
         self.close()
         self.functions = {}
         self.workdir = Path(tempfile.mkdtemp(prefix="minippo-worker-"))
@@ -197,43 +276,89 @@ class Sandbox:
         (lib / "exercises").mkdir()
         (lib / "exercises" / "__init__.py").write_text(f"__path__ = [{str(student)!r}]\n", encoding="utf-8")
         run.mkdir()
+        hidden = self._hidden()
+        kept = [p for p in interpreter_paths() if any(under(p, h) for h in hidden)]
         from_judge, to_worker = os.pipe()  # (read end, write end)
         from_worker, to_judge = os.pipe()
-        command = [sys.executable, "-I", str(lib / "minippo" / "grading" / "worker.py"), str(from_judge), str(to_judge)]
-        hidden = [str(p) for p in self._hidden()]
+        # -B: no bytecode written into the interpreter's folders, which the worker may only read
+        command = [sys.executable, "-I", "-B", str(lib / "minippo" / "grading" / "worker.py"), str(from_judge),
+                   str(to_judge)]  # fmt: skip
         if self.isolation == "namespaces":
+            stage = self.workdir / "stage"
+            stage.mkdir()
             command = ["unshare", "--mount", "--pid", "--fork", "--kill-child", "--mount-proc", "sh", "-c",
-                       HIDE_SCRIPT, "sh", str(len(hidden)), *hidden, *command]  # fmt: skip
+                       HIDE_SCRIPT, "sh", str(stage), str(len(hidden)), str(len(kept)), *map(str, hidden),
+                       *map(str, kept), *command]  # fmt: skip
         elif os.getuid() == 0 and shutil.which("setpriv"):
             # root without its capabilities: it cannot read another process's memory or environment
             command = ["setpriv", "--bounding-set=-all", "--inh-caps=-all", "--no-new-privs", *command]
         env = {"PATH": os.environ.get("PATH", os.defpath), "HOME": str(run), "LANG": "C.UTF-8", "TMPDIR": str(run),
                "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}  # fmt: skip
+        # what the worker says before it reads its first frame (an interpreter that cannot start says why here); its
+        # size is bounded by the worker's file-size limit once the student's code runs
+        errors = open(self.workdir / "stderr", "wb")  # noqa: SIM115 - closed below, once the worker has it
         try:
             self.process = subprocess.Popen(
                 command, cwd=run, env=env, pass_fds=(from_judge, to_judge), stdin=subprocess.DEVNULL,
-                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+                stdout=subprocess.DEVNULL, stderr=errors, start_new_session=True,
             )  # fmt: skip
+        except OSError as error:
+            os.close(to_worker)
+            os.close(from_worker)
+            self._fail_to_start(f"{command[0]} could not be run ({error.strerror or error})")
         finally:
+            errors.close()
             os.close(from_judge)
             os.close(to_judge)
         self._write, self._read = to_worker, from_worker
-        forbidden = [str(p) for p in self.hide]
         # minippo itself loads native libraries (threadpoolctl) that the worker's guard refuses once the student's
         # code runs: a submission that mentions minippo gets it imported first
         mentions = any("minippo" in p.read_text(errors="replace") for p in student.rglob("*.py"))
         start = {
             "path": [str(student), str(lib)],
-            "forbidden": forbidden,
+            "forbidden": [str(p) for p in self.hide],
+            "interpreter": [str(p) for p in interpreter_paths()],
             "limits": self.limits,
             "answers": _all_answers(),
             "preload": ["minippo"] if mentions else [],
         }
         try:
             write_frame(self._write, start)
+            ready, _, _ = select.select([self._read], [], [], STARTUP_S)
+            header, _ = read_frame(self._read) if ready else ({"op": "silent"}, [])
+        except (OSError, EOFError, WireError, ValueError):
+            header = {"op": "died"}
+        if header.get("op") != "ready":
+            self._fail_to_start(self._startup_failure(header))
+
+    def _fail_to_start(self, reason: str) -> None:
+        """Record the grader's failure to start a worker (in the grader's log too) and raise it as GraderError."""
+        self.close()
+        self.broken = f"the grader could not start the process that runs the student's code: {reason}; {WHAT_TO_DO}"
+        log_grader_error(self.broken)
+        raise GraderError(self.broken)
+
+    def _startup_failure(self, header: dict) -> str:
+        """Why a worker did not say it was running: the worker's own words, how it ended, and what it printed."""
+        if header.get("op") == "grader_error":
+            return str(header.get("text", "it could not read its own interpreter"))[:500]
+        if header.get("op") == "silent":
+            return f"it did not answer within {STARTUP_S} s"
+        process = self.process
+        try:
+            code = process.wait(timeout=10) if process is not None else None
+        except subprocess.TimeoutExpired:
+            code = None
+        try:
+            said = (self.workdir / "stderr").read_bytes()[-4000:].decode("utf-8", "replace").strip().splitlines()
         except OSError:
-            self.close()
-            raise WorkerDied("the process that runs the code could not be started") from None
+            said = []
+        last = said[-1].strip() if said else ""
+        how = {None: "it stopped answering", 97: "the course's files could not be hidden from it",
+               126: f"{sys.executable} could not be run (exit code 126)",
+               127: f"{sys.executable} was not found (exit code 127)"}  # fmt: skip
+        reason = how.get(code) or f"it exited with code {code}"
+        return f"{reason} before it ran anything ({last[:300]})" if last else f"{reason} before it ran anything"
 
     def load(self, chapter: str) -> str | None:
         """Import the student's ``chapter`` module in the worker (starting one if needed); the import's error in
@@ -261,14 +386,14 @@ class Sandbox:
         return new
 
     def _hidden(self) -> list[Path]:
-        """The folders to cover in the worker's mount namespace: those that exist and do not hold the worker's own."""
-        found = []
+        """The folders to cover in the worker's mount namespace, resolved: those that exist, do not hold the worker's
+        own folder and are not inside another one (covered with it)."""
+        found: list[Path] = []
         for path in self.hide:
             real = Path(os.path.realpath(path))
-            if real.is_dir() and real != Path("/") and real not in found:
-                if not (self.workdir == real or real in self.workdir.parents):
-                    found.append(real)
-        return found
+            if real.is_dir() and real != Path("/") and real not in found and not under(self.workdir, real):
+                found.append(real)
+        return [p for p in found if not any(p != q and under(p, q) for q in found)]
 
     def alive(self) -> bool:
         return self.process is not None and self.process.poll() is None
@@ -307,8 +432,8 @@ class Sandbox:
             return "the process running it stopped answering"
         if code < 0:
             return self._death_by_signal(code)
-        if code == 97:
-            return "the grader could not hide the course's files from it"
+        if code == 97:  # only the namespace's shell exits with it, before the worker starts
+            return "the grader could not hide the course's files from it (the grader's fault, not the code's)"
         if self.isolation == "namespaces" and 128 < code < 128 + 65:
             code = 128 - code  # the shell's way of saying "killed by signal code - 128"
             return self._death_by_signal(code)

@@ -51,7 +51,9 @@ def run_tests(
     hide=(),
 ):
     """Run pytest on ``files`` against ``impl`` in a child process; return (collected node ids, results, note).
-    ``integrity``, if given, is filled with {chapter number: [notes]} and {"isolation": how the worker was kept apart}.
+    ``integrity``, if given, is filled with {chapter number: [notes]}, {"isolation": how the worker was kept apart}
+    and, when the grader itself could not run the student's code (its worker did not start), {"grader_error":
+    [why]}: then nothing was graded, whatever the results say (see ``grader_error``).
     ``hide``: folders the student's worker must not see besides the repository (the class folder).
 
     If the child process dies (student code that calls os._exit, crashes the interpreter or is killed), the test it
@@ -141,6 +143,11 @@ def _read_log(log: Path, results: dict, key: str, integrity: dict) -> dict:
             if record.get("isolation"):
                 integrity["isolation"] = record["isolation"]
             continue
+        if "grader_error" in record:
+            errors = integrity.setdefault("grader_error", [])
+            if record["grader_error"] not in errors:
+                errors.append(str(record["grader_error"]))
+            continue
         if "collected" in record:
             found["collected"] = record["collected"]
             continue
@@ -153,6 +160,12 @@ def _read_log(log: Path, results: dict, key: str, integrity: dict) -> dict:
     if forged:
         integrity.setdefault("log", []).append(f"{forged} line(s) of the grader's log were not written by the tests")
     return found
+
+
+def grader_error(integrity: dict) -> str | None:
+    """The grader's own failure in a run (its worker could not start): the student was not graded. None if none."""
+    errors = integrity.get("grader_error") or []
+    return str(errors[0]) if errors else None
 
 
 def _death(returncode: int) -> str:

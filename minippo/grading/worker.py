@@ -460,11 +460,16 @@ REFUSED_EVENTS = ("os.fork", "os.forkpty", "os.exec", "os.posix_spawn", "os.spaw
                   "socket.connect", "socket.bind", "sys.setprofile", "sys.settrace", "os.chdir")  # fmt: skip
 
 
-def install_guard(forbidden: list[str], note) -> None:
+WRITING = os.O_WRONLY | os.O_RDWR | os.O_CREAT | os.O_TRUNC | os.O_APPEND
+
+
+def install_guard(forbidden: list[str], note, interpreter=()) -> None:
     """An audit hook that refuses (and reports) opening or listing anything under ``forbidden`` (the repository, the
     other students' folders, the grader's own files), other processes' /proc entries, starting processes and foreign
-    calls. It is a second line behind the process boundary and the namespaces, not the only one."""
-    roots = tuple(os.path.realpath(p) for p in forbidden)
+    calls. ``interpreter``: the interpreter's own folders, which stay readable wherever they are (a .venv inside the
+    repository) but are never written. It is a second line behind the process boundary and the namespaces, not the
+    only one."""
+    hidden = guarded(forbidden, interpreter)
     own_proc = (f"/proc/{os.getpid()}", "/proc/self", "/proc/thread-self")
     reported = set()
 
@@ -474,23 +479,30 @@ def install_guard(forbidden: list[str], note) -> None:
             note(what)
         raise PermissionError(f"the grader does not allow this: {what}")
 
-    def hidden(path) -> bool:
+    def refused(path, writes: bool) -> bool:
         if isinstance(path, int):
             return False
         try:
             real = os.path.realpath(os.fsdecode(path))
         except (TypeError, ValueError):
             return False
-        if any(_under(real, root) for root in roots):
+        if hidden(real, writes):
             return True
         parts = real.split(os.sep)
         return len(parts) > 2 and parts[1] == "proc" and parts[2].isdigit() and not real.startswith(own_proc)
 
     def hook(event, args):
-        if event in ("open", "os.listdir", "os.scandir", "shutil.copyfile", "os.symlink", "os.link", "os.rename",
-                     "os.remove", "os.rmdir", "os.truncate", "os.chmod", "os.utime"):  # fmt: skip
-            if args and hidden(args[0]):
+        if event in ("open", "os.listdir", "os.scandir"):
+            writes = event == "open" and len(args) > 2 and isinstance(args[2], int) and bool(args[2] & WRITING)
+            if args and refused(args[0], writes):
                 refuse(f"touched {os.fsdecode(args[0]) if not isinstance(args[0], int) else args[0]}")
+        elif event in ("shutil.copyfile", "os.symlink", "os.link", "os.rename", "os.remove", "os.rmdir",
+                       "os.truncate", "os.chmod", "os.utime"):  # fmt: skip
+            # each changes its first path (copyfile and link: their second)
+            changed = args[1] if event in ("shutil.copyfile", "os.symlink", "os.link") and len(args) > 1 else args[0]
+            for path, writes in ((args[0], event not in ("shutil.copyfile", "os.symlink", "os.link")), (changed, True)):
+                if args and refused(path, writes):
+                    refuse(f"touched {os.fsdecode(path) if not isinstance(path, int) else path}")
         elif event == "import" and args and str(args[0]).split(".")[0] in ("solutions", "_harness"):
             refuse(f"imported {args[0]}")
         elif event.startswith(REFUSED_EVENTS):
@@ -499,17 +511,48 @@ def install_guard(forbidden: list[str], note) -> None:
     sys.addaudithook(hook)
 
 
+def guarded(forbidden, interpreter):
+    """``hidden(path, writes)``: whether the worker may not reach the resolved ``path``: anything under a folder of
+    ``forbidden`` but the interpreter's own folders inside it, which it may read and not write."""
+    roots = [os.path.realpath(p) for p in forbidden]
+    kept = [os.path.realpath(p) for p in interpreter]
+
+    def hidden(real: str, writes: bool = False) -> bool:
+        if not any(_under(real, root) for root in roots):
+            return False
+        return writes or not any(_under(real, path) for path in kept)
+
+    return hidden
+
+
 def _under(path: str, root: str) -> bool:
-    return path == root or path.startswith(root.rstrip(os.sep) + os.sep)
+    """Whether the resolved ``path`` is ``root`` or inside it, as paths: /x/course-venv is not inside /x/course."""
+    return os.path.commonpath([path, root]) == root
+
+
+def check_interpreter(interpreter) -> str | None:
+    """Whether this process can read the interpreter's folders it was told of (they are mounted back into the
+    namespace where the course is hidden); what is wrong in words, or None."""
+    for path in interpreter:
+        if not os.access(path, os.R_OK):
+            return f"the worker cannot read its interpreter's {path}"
+    return None
 
 
 def main() -> None:
     read_fd, write_fd = int(sys.argv[1]), int(sys.argv[2])
     header, _ = read_frame(read_fd)
+    interpreter = [str(p) for p in header.get("interpreter", [])]
     for path in reversed(header["path"]):
         sys.path.insert(0, path)
-    hidden = [os.path.realpath(p) for p in header["forbidden"]]
-    sys.path[:] = [p for p in sys.path if not any(_under(os.path.realpath(p or "."), h) for h in hidden)]
+    hidden = guarded(header["forbidden"], interpreter)
+    sys.path[:] = [p for p in sys.path if not hidden(os.path.realpath(p or "."))]
+    # the interpreter runs (NumPy imported, the frame read): the grader's part of starting is done, or says why not;
+    # nothing of the student's has run yet
+    problem = check_interpreter(interpreter)
+    write_frame(write_fd, {"op": "grader_error", "text": problem} if problem else {"op": "ready"})
+    if problem:
+        os._exit(0)
     worker = Worker(read_fd, write_fd)
 
     def note(text: str) -> None:
@@ -528,7 +571,7 @@ def main() -> None:
     import traceback  # noqa: F401
 
     apply_limits(header["limits"])
-    install_guard(header["forbidden"], note)
+    install_guard(header["forbidden"], note, interpreter)
     worker.serve()
 
 
