@@ -39,20 +39,24 @@ const measure = () => [...document.querySelectorAll("article div.math")].map((bo
     const style = getComputedStyle(box), outer = box.getBoundingClientRect();
     const left = outer.left + box.clientLeft + parseFloat(style.paddingLeft);
     const right = left + box.clientWidth - parseFloat(style.paddingLeft) - parseFloat(style.paddingRight);
-    let inkLeft = Infinity, inkRight = -Infinity;
+    const number = box.querySelector(".eqno"), label = number && number.getBoundingClientRect();
+    let inkLeft = Infinity, inkRight = -Infinity, underNumber = false;
     for (const node of math.querySelectorAll("*")) {
         if (node.children.length) continue;  // the leaves: characters, rules, spaces
         const rect = node.getBoundingClientRect();
         if (rect.width <= 0 || rect.height <= 0) continue;
         inkLeft = Math.min(inkLeft, rect.left);
         inkRight = Math.max(inkRight, rect.right);
+        underNumber ||= !!label && rect.right > label.left + 1 && rect.left < label.right - 1
+                         && rect.bottom > label.top + 1 && rect.top < label.bottom - 1;
     }
     const source = container.querySelector("mjx-assistive-mml, math");
-    return {rendered: true, id: box.id, column: right - left, past: Math.max(inkRight - right, left - inkLeft, 0),
+    return {rendered: true, id: box.id, column: right - left, underNumber,
+            past: Math.max(inkRight - right, left - inkLeft, 0),
             tex: (box.getAttribute("data-tex") || (source ? source.textContent : "")).trim().slice(0, 80)};
 });
-const ready = window.MathJax && MathJax.startup && MathJax.startup.promise;
-if (!ready) { done({error: "MathJax did not start"}); }
+// a page without math loads no MathJax; one with math and no MathJax shows its display math unrendered
+if (!(window.MathJax && MathJax.startup && MathJax.startup.promise)) { done({equations: measure()}); }
 else { MathJax.startup.promise.then(() => done({equations: measure()}), (e) => done({error: String(e)})); }
 """
 
