@@ -7,8 +7,10 @@ column; at a phone's 390 pixels at most a tenth of them may be (a few fractions 
 without making them unreadable).
 
 "Wider than its column" is measured on the ink: the boxes of the rendered characters and rules of each equation,
-against the content box of the ``div.math`` Sphinx puts it in. Any SEVERE console message (a MathJax file that did
-not load, say) fails a test too, and so does a request to any host but the test's own: the book renders math offline.
+against the content box of the ``div.math`` Sphinx puts it in and against the equation's number, "(14.4)", which
+Sphinx floats at the column's right: ink past the column's edge or under the number is a formula cut short.
+Any SEVERE console message (a MathJax file that did not load, say) fails a test too, and so does a request to any
+host but the test's own: the book renders math offline.
 
 To measure another build without building the book, point MINIPPO_BOOK_HTML at its HTML directory.
 """
@@ -117,12 +119,14 @@ def equations_of(driver, url: str, size: tuple[int, int]) -> list[dict]:
 
 
 def too_wide(equations: list[dict]) -> list[dict]:
-    return [e for e in equations if e["past"] > SLACK]
+    return [e for e in equations if e["past"] > SLACK or e["underNumber"]]
 
 
 def report(page: str, equations: list[dict]) -> str:
     return "; ".join(
-        f"{page} {e['id'] or e['tex']!r}: {e['past']:.0f} px past a {e['column']:.0f} px column" for e in equations
+        f"{page} {e['id'] or e['tex']!r}: {e['past']:.0f} px past a {e['column']:.0f} px column"
+        + (", under its number" if e["underNumber"] else "")
+        for e in equations
     )
 
 
