@@ -1,6 +1,6 @@
 """The built book's images, for a reader who cites them and one who hears them: every <img> has an alt text that
 describes it (not empty, not a file name, not a hash), and every figure a page's code generates sits in a <figure>
-with a numbered caption ("Figure 5.2: ...")."""
+with a numbered caption ("Figure 5.2: ..."), and so does every animation (a GIF)."""
 
 import re
 from html.parser import HTMLParser
@@ -18,6 +18,7 @@ PAGES_WITHOUT_CAPTIONS: set[str] = set()
 # what jupyter_execute's images become in _images/: a hexadecimal digest, sometimes with a "_1" of Sphinx's
 GENERATED = re.compile(r"(?:^|/)_images/[0-9a-f]{16,}(?:_\d+)?\.png$")
 FILE_NAME = re.compile(r"\.(?:png|jpe?g|gif|svg|webp)$|[/\\]", re.IGNORECASE)
+ANIMATION = re.compile(r"\.gif$", re.IGNORECASE)
 HASH = re.compile(r"\b[0-9a-f]{12,}\b", re.IGNORECASE)
 VOID = {"img", "br", "hr", "input", "meta", "link", "source", "wbr", "col", "area", "base", "embed", "param", "track"}
 
@@ -76,9 +77,10 @@ def problems_of(html: str) -> list[str]:
             problems.append(f"{name}: no alt text")
         elif FILE_NAME.search(text) or HASH.search(text) or text == name or text == name.rsplit(".", 1)[0]:
             problems.append(f"{name}: the alt text is a file name or a hash: {text!r}")
-        if GENERATED.search(src):
+        if GENERATED.search(src) or ANIMATION.search(src):
             if figure is None:
-                problems.append(f"{name}: a generated figure outside any <figure>")
+                kind = "an animation" if ANIMATION.search(src) else "a generated figure"
+                problems.append(f"{name}: {kind} outside any <figure>")
             # "Figure 5.2" in a numbered chapter, "Figure 2" on a page before the chapters
             elif not re.fullmatch(r"\s*Figure \d+(\.\d+)*\s*", parser.captions[figure]):
                 problems.append(f"{name}: no numbered caption (found {parser.captions[figure]!r})")
@@ -111,7 +113,11 @@ def test_images_have_alt_texts_and_generated_figures_numbered_captions(built_boo
     "html, expected",
     [
         ('<img src="_static/logo.svg" alt="minippo: PPO from scratch (home)">', []),
-        ('<img src="_static/media/hopper.gif">', ["hopper.gif: no alt text"]),
+        ('<img src="_static/media/hopper.gif">',
+         ["hopper.gif: no alt text", "hopper.gif: an animation outside any <figure>"]),
+        ('<figure id="fig-ch11-hopper"><img alt="A Hopper hopping" src="_images/hopper.gif" /><figcaption><p>'
+         '<span class="caption-number">Figure 11.5 </span><span class="caption-text">A Hopper</span></p></figcaption>'
+         '</figure>', []),
         ('<img src="_images/6c7045ff0a1b2c3d4e5f.png" alt="_images/6c7045ff0a1b2c3d4e5f.png">',
          ["6c7045ff0a1b2c3d4e5f.png: the alt text is a file name or a hash: '_images/6c7045ff0a1b2c3d4e5f.png'",
           "6c7045ff0a1b2c3d4e5f.png: a generated figure outside any <figure>"]),
