@@ -18,7 +18,7 @@ check_claims = importlib.util.module_from_spec(spec)
 sys.modules["check_claims"] = check_claims
 spec.loader.exec_module(check_claims)
 
-PAGE = """\
+FRONT_MATTER = """\
 ---
 kernelspec:
   name: python3
@@ -27,6 +27,11 @@ jupytext:
   text_representation:
     format_name: myst
 ---
+"""
+
+PAGE = (
+    FRONT_MATTER
+    + """\
 # A page
 
 ```{code-cell} ipython3
@@ -46,6 +51,7 @@ if draw == 1:
 assert draw >= 0, "a message"
 ```
 """
+)
 
 
 @pytest.mark.timeout(180)
@@ -106,15 +112,9 @@ def test_update_replaces_only_the_draws_it_runs(tmp_path):
     assert len(json.loads(out.with_suffix(".json").read_text())["runs"]) == 2
 
 
-MARGIN_PAGE = """\
----
-kernelspec:
-  name: python3
-  display_name: Python 3
-jupytext:
-  text_representation:
-    format_name: myst
----
+MARGIN_PAGE = (
+    FRONT_MATTER
+    + """\
 # Slack
 
 ```{code-cell} ipython3
@@ -129,6 +129,7 @@ assert np.any(values > 2.5 + draw) and all(v < 50 for v in values)
 assert "text" != "other"
 ```
 """
+)
 
 
 @pytest.mark.timeout(180)
