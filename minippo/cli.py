@@ -419,14 +419,16 @@ def build_parser() -> Parser:
 
     p = sub.add_parser(
         "doctor",
-        help="name the failure signatures in a run's progress.csv",
-        description="Read RUN/progress.csv (minippo's, or Stable-Baselines3's CSV logger's; CleanRL logs to "
-        "TensorBoard, so export its scalars first) and report each failure signature its debug variables show: what "
-        "was seen against the healthy range, the likely causes in order, and the section of the book to read. Exit "
-        "status: 0 when none is found, 1 when one is, 2 on bad input.",
+        help="name the failure signatures in a run's log",
+        description="Read a run's log (minippo's or Stable-Baselines3's progress.csv, SB3's or CleanRL's TensorBoard "
+        "event files, or W&B's CSV export of either) and report each failure signature its debug variables show: what "
+        "was seen against the healthy range, the likely causes in order, and the section of the book to read. A rule "
+        "whose data the log lacks is reported as not checked. Exit status: 0 when every rule was checked and none "
+        "holds, 1 when one holds, 2 on bad input, 3 when none holds but some rules could not be checked.",
     )
-    p.add_argument("run", help="a run folder holding progress.csv")
-    p.add_argument("--json", action="store_true", help="the report as JSON")
+    p.add_argument("run", help="a run folder (holding progress.csv or one run's TensorBoard event files), a CSV file "
+                   "or an events file")  # fmt: skip
+    p.add_argument("--json", action="store_true", help='the report as JSON, and an error as {"error": ...}')
     p.set_defaults(func=cmd_doctor)
     return parser
 

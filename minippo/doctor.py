@@ -1,45 +1,24 @@
-"""``minippo doctor RUN``: read a run's progress.csv and name the failure signatures its debug variables show.
+"""``minippo doctor RUN``: read a run's log and name the failure signatures its debug variables show.
 
-Reads minippo's progress.csv or Stable-Baselines3's (its CSV logger, ``configure(folder, ["csv"])``). CleanRL logs
-to TensorBoard, not to a CSV file: export its scalars to a progress.csv with minippo's column names first.
+Reads minippo's progress.csv, Stable-Baselines3's CSV or TensorBoard log, CleanRL's TensorBoard log, or W&B's CSV
+export of either; minippo/doctor_logs.py reads them, and its SOURCES table maps each one's columns to minippo's names
+and units. A rule whose variable the log lacks (or has on too few updates) is reported as not checked, not as clean.
 
-Stable-Baselines3's columns, mapped to minippo's names (an SB3 row of iteration i carries the train/ values of update
-i − 1, logged before update i trains; the doctor pairs them with that update's rollout, so update i − 1 reads the
-rollout/ columns of row i − 1 and the train/ columns of row i):
-
-=============================  ===================  =====================================================
-Stable-Baselines3               minippo              what differs
-=============================  ===================  =====================================================
-time/iterations − 1             update
-time/total_timesteps            step                 (of row i − 1: the steps of update i − 1's rollout)
-rollout/ep_rew_mean             return_mean          the same: the mean of the last 100 episodes
-rollout/ep_len_mean             length_mean          the same
-train/approx_kl                 approx_kl            both Ê[(r − 1) − log r]; SB3's is the mean over the minibatches of
-                                                     the last epoch, each before its step; minippo's is over the whole
-                                                     batch after the update (so minippo's is usually larger)
-train/clip_fraction             clip_fraction        SB3's: the mean over the minibatches of every epoch, during
-                                                     training; minippo's: over the whole batch after the update
-−train/entropy_loss             entropy              SB3 logs −entropy, averaged over the minibatches during training;
-                                                     minippo's is over the whole batch after the update
-−train/policy_gradient_loss     policy_objective     the same: L^CLIP averaged over the minibatches
-train/value_loss / 2            value_loss           SB3's is the mean squared error; minippo's is ½(V − V^targ)²
-train/explained_variance        explained_variance   the same: the rollout's values against its returns
-train/learning_rate             lr                   the same
-=============================  ===================  =====================================================
+Exit status: 0 when every rule was checked and none holds, 1 when one holds, 2 on bad input, 3 when none holds but some
+rules could not be checked.
 """
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 from dataclasses import asdict, dataclass
-from pathlib import Path
 
 import numpy as np
 
+from minippo.doctor_logs import NAMES, UNITS, Log, read_log
 from minippo.errors import MinippoError
-from minippo.run_folder import PROGRESS_FIELDS
+from minippo.run_folder import PROGRESS_FIELDS  # noqa: F401 (the book reads the atlas's columns by this name)
 
 CHAPTER = "book/when-ppo-fails.md"  # the appendix "When PPO does not learn"
 ANCHORS = {  # the sections of the atlas chapter that a finding sends the reader to
@@ -56,18 +35,6 @@ ANCHORS = {  # the sections of the atlas chapter that a finding sends the reader
     "atlas-healthy": "the healthy ranges",
 }
 MIN_UPDATES = 10  # the shortest window of a rule
-SB3 = {  # minippo's name: (SB3's column, the factor that turns SB3's value into minippo's)
-    "return_mean": ("rollout/ep_rew_mean", 1.0),
-    "length_mean": ("rollout/ep_len_mean", 1.0),
-    "approx_kl": ("train/approx_kl", 1.0),
-    "clip_fraction": ("train/clip_fraction", 1.0),
-    "entropy": ("train/entropy_loss", -1.0),
-    "policy_objective": ("train/policy_gradient_loss", -1.0),
-    "value_loss": ("train/value_loss", 0.5),
-    "explained_variance": ("train/explained_variance", 1.0),
-    "lr": ("train/learning_rate", 1.0),
-}
-ROLLOUT_COLUMNS = ("return_mean", "length_mean")  # of an SB3 row's own rollout, not of the update before
 WINDOWS = {  # a window's name: the (first, last + 1) indices of the rows it reads, for a run of n updates
     "all updates": lambda n: (0, n),
     "updates 1-10": lambda n: (0, MIN_UPDATES),
@@ -85,6 +52,11 @@ def _statistic(name: str, values: np.ndarray, level: float | None) -> float:
     return float({"median": np.median, "min": np.min, "max": np.max, "mean": np.mean}[name](values))
 
 
+def _enough(values: np.ndarray, window: list) -> bool:
+    """Whether a rule has data enough: a number on at least half of its window's updates, and on 2."""
+    return len(values) >= max(2, len(window) / 2)
+
+
 @dataclass(frozen=True)
 class Rule:
     """One failure signature: ``statistic`` of ``variable`` over ``window`` compared with ``threshold``."""
@@ -100,14 +72,33 @@ class Rule:
     healthy: tuple[float, float]  # the statistic's range over healthy runs
     level: float | None = None  # for "fraction above"
 
-    def measure(self, rows: list[dict]) -> tuple[float, int, int]:
-        """The statistic over the window's finite values, and the window's first and last update."""
+    def values(self, rows: list[dict]) -> tuple[np.ndarray, list[dict]]:
+        """The finite values of the variable over the window, and the window's rows."""
         start, stop = WINDOWS[self.window](len(rows))
         window = rows[start:stop]
-        values = np.array([row[self.variable] for row in window], dtype=float)
-        values = values[np.isfinite(values)]
-        value = _statistic(self.statistic, values, self.level) if len(values) else math.nan
+        values = np.array([row.get(self.variable, math.nan) for row in window], dtype=float)
+        return values[np.isfinite(values)], window
+
+    def measure(self, rows: list[dict]) -> tuple[float, int, int]:
+        """The statistic over the window's finite values (NaN when fewer than half of its updates, or than 2, have
+        one: not enough data), and the window's first and last update."""
+        values, window = self.values(rows)
+        value = _statistic(self.statistic, values, self.level) if _enough(values, window) else math.nan
         return value, int(window[0]["update"]), int(window[-1]["update"])
+
+    def missing(self, rows: list[dict], log: Log | None = None) -> str | None:
+        """Why the rule cannot be measured on ``rows`` (its variable missing or too sparse), or None when it can."""
+        values, window = self.values(rows)
+        if _enough(values, window):
+            return None
+        column = log.column(self.variable) if log else self.variable
+        if log and self.variable in log.absent:
+            state = "is not in the log"
+        elif len(values) == 0:
+            state = "is empty"
+        else:
+            state = f"has a number on {len(values)} of the {len(window)} updates of {self.window}"
+        return f"not enough data for rule {self.id}: column {column} {state}"
 
     def holds(self, value: float) -> bool:
         return math.isfinite(value) and (value > self.threshold if self.comparison == ">" else value < self.threshold)
@@ -187,56 +178,11 @@ class Finding:
         ]
 
 
-def _number(text: str | None, where: str) -> float:
-    if text is None or text.strip() == "":
-        return math.nan
-    try:
-        return float(text)
-    except ValueError:
-        raise MinippoError(f"{where}: {text!r} is not a number") from None
-
-
-def read_run(folder) -> tuple[str, list[dict]]:
-    """("minippo" or "sb3", the rows of updates) from ``folder``'s progress.csv, in minippo's names and units."""
-    folder = Path(folder)
-    if not folder.is_dir():
-        raise MinippoError(f"no run folder {folder}")
-    path = folder / "progress.csv"
-    if not path.is_file():
-        raise MinippoError(
-            f"{folder} has no progress.csv (minippo train and Stable-Baselines3's CSV logger write one; "
-            "CleanRL logs to TensorBoard)"
-        )
-    try:
-        with open(path, newline="", encoding="utf-8") as handle:
-            reader = csv.DictReader(handle)
-            table, header = list(reader), set(reader.fieldnames or ())
-    except (csv.Error, UnicodeDecodeError) as error:
-        raise MinippoError(f"cannot read {path} as CSV ({error})") from None
-    if not header:
-        raise MinippoError(f"{path} is empty")
-    if set(PROGRESS_FIELDS) <= header:
-        rows = [{key: _number(row[key], f"{path}, line {i + 2}, {key}") for key in PROGRESS_FIELDS}
-                for i, row in enumerate(table)]  # fmt: skip
-        return "minippo", rows
-    if "time/iterations" in header and any(column.startswith("train/") for column in header):
-        rows = []
-        for i in range(1, len(table)):  # row i holds the train/ columns of update (its iteration − 1)
-            iteration, before = (_number(table[j]["time/iterations"], f"{path}, line {j + 2}") for j in (i, i - 1))
-            if math.isnan(iteration):
-                raise MinippoError(f"{path}, line {i + 2}: no time/iterations")
-            update = iteration - 1
-            rollout = table[i - 1] if before == update else {}  # its rollout's row, when every iteration is logged
-            row = {"update": update, "step": _number(rollout.get("time/total_timesteps"), f"{path}, line {i + 1}")}
-            for name, (column, factor) in SB3.items():
-                source = rollout if name in ROLLOUT_COLUMNS else table[i]
-                row[name] = factor * _number(source.get(column), f"{path}, line {i + 2}, {column}")
-            rows.append(row)
-        return "sb3", rows
-    raise MinippoError(
-        f"{path} has none of the columns of minippo's progress.csv ({', '.join(PROGRESS_FIELDS[:4])}, ...) or of "
-        "Stable-Baselines3's (time/iterations, train/approx_kl, ...)"
-    )
+def read_run(path) -> tuple[str, list[dict]]:
+    """(the source: "minippo", "sb3" or "cleanrl", the rows of updates in minippo's names and units) of the log at
+    ``path`` (minippo/doctor_logs.py reads it)."""
+    log = read_log(path)
+    return log.source, log.rows
 
 
 def diagnose(rows: list[dict], rules=RULES) -> list[Finding]:
@@ -251,35 +197,52 @@ def diagnose(rows: list[dict], rules=RULES) -> list[Finding]:
     return findings
 
 
-def report(folder, as_json: bool = False) -> tuple[str, int]:
-    """The doctor's report of the run in ``folder`` and its exit status: 0 when no signature is found, 1 when one is."""
-    kind, rows = read_run(folder)
+def _finite(value: float) -> float | None:
+    return value if math.isfinite(value) else None  # strict JSON has no NaN
+
+
+def report(path, as_json: bool = False) -> tuple[str, int]:
+    """The doctor's report of the run at ``path`` and its exit status: 0 when every rule was checked and none holds, 1
+    when one holds, 3 when none holds but some rules could not be checked (their data is missing)."""
+    log = read_log(path)
+    rows = log.rows
     findings = diagnose(rows)
+    missing = {rule.id: rule.missing(rows, log) for rule in RULES}
+    if all(missing.values()):
+        reasons = dict.fromkeys(reason.split(": ", 1)[1] for reason in missing.values())
+        raise MinippoError(f"{path}: not enough data for any rule: " + "; ".join(reasons))
     measured = [(rule, *rule.measure(rows)) for rule in RULES]
+    status = 1 if findings else 3 if any(missing.values()) else 0
     if as_json:
 
         def described(rule, value, first, last):
-            return {**asdict(rule), "value": value, "updates": [first, last], "found": rule.holds(value),
-                    "read": f"{CHAPTER}#{rule.anchor}"}  # fmt: skip
+            return {**asdict(rule), "value": _finite(value), "updates": [first, last], "found": rule.holds(value),
+                    "missing": missing[rule.id], "read": f"{CHAPTER}#{rule.anchor}"}  # fmt: skip
 
-        text = json.dumps({"run": str(folder), "format": kind, "updates": len(rows),
+        text = json.dumps({"run": str(path), "format": log.source, "file": log.file, "updates": len(rows),
+                           "notes": log.notes,
                            "findings": [described(f.rule, f.value, f.first_update, f.last_update) for f in findings],
-                           "checked": [described(*m) for m in measured]}, indent=1)  # fmt: skip
-        return text, int(bool(findings))
-    head = f"{folder}: {'minippo' if kind == 'minippo' else 'Stable-Baselines3'} progress.csv, {len(rows)} updates"
-    if kind == "sb3":
-        head += " (SB3's approx_kl and clip_fraction are measured during training: usually smaller)"
-    lines = [head]
+                           "checked": [described(*m) for m in measured],
+                           "not_checked": [rule.id for rule in RULES if missing[rule.id]]},
+                          indent=1, allow_nan=False)  # fmt: skip
+        return text, status
+    head = f"{path}: {NAMES[log.source]} {log.file}, {len(rows)} updates"
+    if log.source in UNITS:
+        head += f" ({UNITS[log.source]})"
+    lines = [head, *(f"  note: {note}" for note in log.notes)]
+    checked = [m for m in measured if not missing[m[0].id]]
     if findings:
         lines += [f"{len(findings)} failure signature{'s' * (len(findings) > 1)} found:"]
         for number, finding in enumerate(findings, 1):
             first, *rest = finding.lines()
             lines += [f"{number}. {first}", *rest]
     else:
-        lines += [f"no failure signature found in {len(rows)} updates; what was checked, against the healthy ranges "
-                  f"({CHAPTER}#atlas-healthy):"]  # fmt: skip
-        for rule, value, first, last in measured:
+        by = f"by the {len(checked)} rules of {len(RULES)} that could be checked " if len(checked) < len(RULES) else ""
+        lines += [f"no failure signature found {by}in {len(rows)} updates; what was checked, against the healthy "
+                  f"ranges ({CHAPTER}#atlas-healthy):"]  # fmt: skip
+        for rule, value, first, last in checked:
             low, high = rule.healthy
             lines += [f"  {rule.variable}: {rule.statistic} over updates {first}-{last} = {value:.4g} (flagged "
                       f"{rule.comparison} {rule.threshold:g}; healthy runs: {low:.4g}–{high:.4g})"]  # fmt: skip
-    return "\n".join(lines), int(bool(findings))
+    lines += [reason for reason in missing.values() if reason]
+    return "\n".join(lines), status
