@@ -6,6 +6,7 @@ import argparse
 import dataclasses
 import functools
 import json
+import os
 import signal
 import sys
 import threading
@@ -443,11 +444,29 @@ def from_preset(args, field: str) -> str | None:
     return preset
 
 
+def error_exit(message: str, as_json: bool) -> int:
+    """One line on stderr (and, for --json, {"error": ...} on stdout); exit status 2."""
+    if as_json:
+        print(json.dumps({"error": message}))
+    print(f"minippo: error: {message}", file=sys.stderr)
+    return 2
+
+
+def wants_json(argv, args) -> bool:
+    """Whether errors go out as JSON: ``minippo doctor --json``, even when its other arguments did not parse."""
+    if args is not None:
+        return bool(getattr(args, "json", False))
+    words = sys.argv[1:] if argv is None else list(argv)
+    return bool(words) and words[0] == "doctor" and "--json" in words
+
+
 def main(argv=None) -> int:
     args = None
     try:
         args = build_parser().parse_args(argv)
-        return args.func(args)
+        status = args.func(args)
+        sys.stdout.flush()  # here, so that a reader gone away (| head) is caught below, not at exit
+        return status
     except ConfigError as error:  # a field's message, in the words of the option that set it
         message = str(error)
         preset = from_preset(args, error.field) if args is not None and error.field else None
@@ -459,11 +478,16 @@ def main(argv=None) -> int:
             message = (f"--config {error.field}" if by_config else flag(error.field)) + message[len(error.field) :]
         elif not error.field:
             message = f"--config: {message}"
-        print(f"minippo: error: {message}", file=sys.stderr)
-        return 2
+        return error_exit(message, wants_json(argv, args))
     except MinippoError as error:
-        print(f"minippo: error: {error}", file=sys.stderr)
-        return 2
+        return error_exit(str(error), wants_json(argv, args))
+    except BrokenPipeError:  # stdout's reader went away (minippo doctor RUN | head): stop quietly, as a command that
+        # SIGPIPE ends does, with its status; stdout goes to /dev/null so that Python's last flush cannot fail again
+        try:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        except (OSError, ValueError):
+            pass
+        return 128 + 13  # SIGPIPE
     except KeyboardInterrupt:
         print("minippo: interrupted", file=sys.stderr)
         return 130
