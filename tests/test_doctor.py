@@ -152,6 +152,65 @@ def test_bad_input_exits_2_with_one_line(tmp_path, name, capsys):
     assert all(fragment in lines[0] for fragment in fragments), lines[0]
 
 
+def test_an_empty_column_is_reported_as_missing_not_as_healthy(tmp_path, capsys):
+    run = progress(tmp_path / "run", steady(40, explained_variance=""))  # a log whose explained variance is blank
+    assert main(["doctor", str(run)]) == 3  # no finding, but not every rule checked: not the clean bill of 0
+    out = capsys.readouterr().out
+    assert "not enough data for rule critic-worse-than-constant: column explained_variance is empty" in out
+    assert "by the 7 rules of 8 that could be checked" in out and "nan" not in out.lower()
+    assert "note: explained_variance has no value on any of the 40 updates" in out
+    assert main(["doctor", str(run), "--json"]) == 3
+    text = capsys.readouterr().out
+    report = json.loads(text, parse_constant=lambda name: pytest.fail(f"{name} in the JSON"))  # strict JSON
+    assert report["not_checked"] == ["critic-worse-than-constant"]
+    check = next(c for c in report["checked"] if c["id"] == "critic-worse-than-constant")
+    assert check["value"] is None and check["missing"].endswith("is empty") and check["found"] is False
+
+
+def test_a_log_with_no_data_for_any_rule_is_bad_input(tmp_path, capsys):
+    empty = dict.fromkeys(("approx_kl", "clip_fraction", "entropy", "value_loss", "explained_variance"), "")
+    run = progress(tmp_path / "run", steady(20, **empty))
+    assert main(["doctor", str(run)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.count("\n") == 1
+    assert captured.err.startswith("minippo: error: ") and "not enough data for any rule" in captured.err
+    assert "column approx_kl is empty" in captured.err and "column explained_variance is empty" in captured.err
+
+
+def test_a_last_line_cut_short_is_not_counted(tmp_path, capsys):
+    run = progress(tmp_path / "run", steady(12))
+    with open(run / "progress.csv", "a") as handle:
+        handle.write("13,6656,0,32.0,32.0,0.0")  # a run killed while it wrote update 13's row
+    kind, rows = read_run(run)
+    assert len(rows) == 12 and rows[-1]["update"] == 12
+    assert main(["doctor", str(run)]) == 0
+    out = capsys.readouterr().out
+    assert "12 updates" in out and "has no line end (the run stopped mid-write): dropped, not counted" in out
+
+
+def test_a_short_row_inside_the_file_is_bad_input(tmp_path):
+    run = progress(tmp_path / "run", steady(12))
+    lines = (run / "progress.csv").read_text().splitlines(keepends=True)
+    lines[5] = "5,2560,0\n"
+    (run / "progress.csv").write_text("".join(lines))
+    with pytest.raises(MinippoError, match=r"line 6: 3 fields, the header has 15"):
+        read_run(run)
+
+
+def test_a_reader_that_goes_away_ends_the_doctor_quietly(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    run = progress(tmp_path / "run", steady(40))
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    doctor = subprocess.Popen([sys.executable, "-m", "minippo", "doctor", str(run)], env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+    doctor.stdout.close()  # the reader is gone before the report is written, as after `| head -1`'s line
+    errors = doctor.stderr.read().decode()
+    assert doctor.wait(timeout=120) == 141 and errors == ""  # 128 + SIGPIPE, as a command SIGPIPE ends
+
+
 # the atlas (benchmarks/atlas.py): what the doctor says of its recorded runs, and of short CartPole runs with its faults
 
 ATLAS_RUNS = Path(__file__).resolve().parents[1] / "benchmarks" / "results" / "atlas_runs.csv"
