@@ -242,17 +242,25 @@ def _sb3_rows(scalars: dict, notes: list) -> list[dict]:
     dumps = sorted({step for points in at.values() for step in points})
     if not dumps:
         return []
+    update_tags = [tag for tag, _, when in table.values() if when == "update" and tag in at]
+    trained = [step for step in dumps if any(step in at[tag] for tag in update_tags)]
     if SB3_ITERATIONS in at:
         iteration = {step: at[SB3_ITERATIONS].get(step, math.nan) for step in dumps}
         if any(math.isnan(value) for value in iteration.values()):
             raise MinippoError(f"a row of SB3's log has no {SB3_ITERATIONS}")
+    elif trained and trained[0] == dumps[0]:  # TensorBoard, its first record after an update: log_interval > 1
+        notes.append(f"no {SB3_ITERATIONS} (SB3 writes none to TensorBoard), and the first record already follows an "
+                     "update, so SB3 logged every few iterations (log_interval > 1): the updates are numbered by "
+                     "record, the step is the record's, and return_mean, length_mean and steps_per_s are of the "
+                     "rollout after each update")  # fmt: skip
+        return [{"update": update, "step": step, **{name: factor * at.get(tag, {}).get(step, math.nan)
+                                                    for name, (tag, factor, _) in table.items()}}
+                for update, step in enumerate(trained, 1)]  # fmt: skip
     else:  # TensorBoard, or W&B's copy of it
         iteration = {step: i + 1 for i, step in enumerate(dumps)}
         notes.append(f"no {SB3_ITERATIONS} (SB3 writes none to TensorBoard): read as one record an iteration, "
                      "learn()'s default log_interval=1")  # fmt: skip
     step_of = {value: step for step, value in iteration.items()}  # an iteration: the step of its dump
-    update_tags = [tag for tag, _, when in table.values() if when == "update" and tag in at]
-    trained = [step for step in dumps if any(step in at[tag] for tag in update_tags)]
     first, last = dumps[0], dumps[-1]
     per_iteration = (last - first) / (iteration[last] - iteration[first]) if last > first else first / iteration[first]
     rows, later = [], 0

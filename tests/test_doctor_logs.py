@@ -135,6 +135,16 @@ def test_sb3s_tensorboard_log_reads_as_its_csv_log(tmp_path):
     assert any("log_interval=1" in note for note in from_events.notes)  # no iteration count in TensorBoard: said
 
 
+def test_sb3s_tensorboard_log_written_every_5th_iteration_is_read_by_record(tmp_path):
+    pytest.importorskip("tensorboard", reason="needs the tensorboard package (pip install 'minippo[doctor]')")
+    run = sb3_log(tmp_path / "sb3", iterations=60, log_interval=5, formats=("tensorboard",))
+    log = read_log(run)  # TensorBoard holds no iteration count: the updates are numbered by record, and said
+    assert len(log.rows) == 12 and [row["update"] for row in log.rows] == list(range(1, 13))
+    assert [row["step"] for row in log.rows] == [N_STEPS * 5 * record for record in range(1, 13)]
+    assert [row["approx_kl"] for row in log.rows] == pytest.approx([kl_of(5 * record - 1) for record in range(1, 13)])
+    assert any("log_interval > 1" in note for note in log.notes)
+
+
 def test_a_real_sb3_ppo_run_logged_to_tensorboard_is_read(tmp_path, capsys):
     pytest.importorskip("tensorboard", reason="needs the tensorboard package (pip install 'minippo[doctor]')")
     sb3 = pytest.importorskip("stable_baselines3", reason="needs Stable-Baselines3")
