@@ -284,7 +284,7 @@ def make_run(entry: Entry, folder: Path) -> dict:
 
     shutil.rmtree(folder, ignore_errors=True)  # what an interrupted run left
     torch.set_num_threads(1)
-    started = time.perf_counter()
+    started, cpu_started = time.perf_counter(), time.process_time()
     with threadpool_limits(1):
         try:
             steps, updates = RUNNERS[entry.library](entry, folder)
@@ -292,8 +292,9 @@ def make_run(entry: Entry, folder: Path) -> dict:
         except (MinippoError, ValueError, RuntimeError) as error:  # NaN in minippo, in torch's distributions
             steps, updates, outcome = None, None, f"stopped: {str(error).splitlines()[0][:200]}"
     size = sum(path.stat().st_size for path in folder.rglob("*") if path.is_file() and path.suffix not in (".npz",))
-    return {"id": entry.id, "outcome": outcome, "steps": steps, "updates": updates,
-            "wall_s": round(time.perf_counter() - started, 1), "folder_bytes": size}  # fmt: skip
+    wall, cpu = round(time.perf_counter() - started, 1), round(time.process_time() - cpu_started, 1)
+    return {"id": entry.id, "outcome": outcome, "steps": steps, "updates": updates, "folder_bytes": size,
+            "wall_s": wall, "cpu_s": cpu}  # fmt: skip
 
 
 def versions(entry: Entry) -> str:
@@ -316,13 +317,15 @@ def speed_key(entry: Entry) -> tuple:
 
 
 def measure_speeds() -> None:
-    """A tiny run (one batch, at least 4,096 steps) of each speed_key, into results/doctor_speeds.csv."""
+    """A tiny run (one batch, at least 4,096 steps) of each speed_key, into results/doctor_speeds.csv; its speed is
+    steps per second of the process's CPU time, which other work on the machine slows less than its clock."""
     rows, commit = [], code_commit()
     for key, entry in {speed_key(e): e for e in reversed(manifest())}.items():
         with tempfile.TemporaryDirectory() as scratch:
             result = make_run(dataclasses.replace(entry, tiny=max(batch_of(entry), 4096)), Path(scratch) / "run")
         rows.append(dict(zip(("library", "settings", "task", "fault"), key), steps=result["steps"],
-                         wall_s=result["wall_s"], steps_per_s=round(result["steps"] / result["wall_s"], 1),
+                         wall_s=result["wall_s"], cpu_s=result["cpu_s"],
+                         steps_per_cpu_s=round(result["steps"] / result["cpu_s"], 1),
                          load_1min=round(os.getloadavg()[0], 2), date=datetime.date.today().isoformat(),
                          commit=commit))  # fmt: skip
         print(*rows[-1].values(), flush=True)
@@ -357,7 +360,7 @@ def plan(measure: bool) -> int:
     if not SPEEDS_CSV.exists():
         print("no measured speeds yet: python -m benchmarks.doctor_runs plan --measure")
         return 0
-    speeds = {tuple(r[k] for k in ("library", "settings", "task", "fault")): float(r["steps_per_s"])
+    speeds = {tuple(r[k] for k in ("library", "settings", "task", "fault")): float(r["steps_per_cpu_s"])
               for r in read_rows(SPEEDS_CSV)}  # fmt: skip
     cpu = Counter()
     for e in entries:
