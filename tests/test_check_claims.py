@@ -211,6 +211,27 @@ def test_two_sides_of_one_sign_are_judged_on_the_log_scale():
     assert judged["status"] == "thin" and 2.6 < judged["spreads"] < 2.8
 
 
+def test_an_errors_size_against_a_tolerance_is_judged_as_a_difference():
+    """|e| < 5 σ with e ~ N(0, σ²), which fails about once in two million draws: on the log scale the slack
+    log(5σ / |e|) has its risk stretched out (about 3 spreads, thin), as a difference 5σ − |e| it is about 6 spreads.
+    The same slacks under a claim without abs stay on the log scale."""
+    from scipy.stats import norm
+
+    errors = np.abs(norm.ppf((np.arange(16) + 0.5) / 16))  # |e| at 16 evenly spaced quantiles, σ = 1
+    pairs = [[5 - e, float(np.log(5 / e))] for e in errors]
+    rows = _rows(pairs)
+    for row in rows:
+        row["claim"] = "assert abs(mc - exact) < 5 * stderr"
+    (judged,) = check_claims.judge(rows)
+    assert judged["status"] == "stands" and judged["spreads"] > 5
+    (judged,) = check_claims.judge(_rows(pairs))  # "assert x > 0": the log scale
+    assert judged["status"] == "thin" and judged["spreads"] < 3.85
+    assert check_claims.distance_atoms("assert np.max(np.abs(h - exact)) < 0.1 and 0 < x < 3") == {0}
+    assert check_claims.distance_atoms("assert all(abs(r - 1) < 0.2 for r in rs) and 0.5 > abs(y)") == {0, 1}
+    assert check_claims.distance_atoms("assert abs(a - c) < abs(b - c)") == set()  # two sizes: a factor apart
+    assert check_claims.distance_atoms("assert -0.005 < a - b < 0.05") == set()
+
+
 def test_report_judges_the_record_without_running_anything(tmp_path, capsys):
     out = tmp_path / "claims.csv"
     with open(out, "w", newline="") as handle:

@@ -140,6 +140,54 @@ class _Atoms:
         return test
 
 
+def distance_atoms(claim: str) -> set[int]:
+    """The atoms of ``claim`` (an assert's text, numbered as ``_Atoms`` numbers them) that bound an error's size by a
+    tolerance: the side that must be the smaller holds ``abs`` (Python's, or ``np.abs``/``numpy.abs``, perhaps under a
+    max or a mean) and the other side holds none. Such a size is near 0 by design, where the log scale stretches a small
+    error into a large slack and a typical one into risk; it is judged as a difference (``judge``)."""
+    try:
+        test = ast.parse(claim).body[0]
+    except (SyntaxError, IndexError):
+        return set()
+    if not isinstance(test, ast.Assert):
+        return set()
+
+    def has_abs(node: ast.expr) -> bool:
+        for sub in ast.walk(node):
+            if isinstance(sub, ast.Call):
+                name = sub.func.attr if isinstance(sub.func, ast.Attribute) else getattr(sub.func, "id", "")
+                if name in ("abs", "absolute"):
+                    return True
+        return False
+
+    found: set[int] = set()
+    numbering = _Atoms()  # only its count, which numbers the comparisons as the recorded claim's
+
+    def visit(node: ast.expr) -> None:
+        if isinstance(node, ast.BoolOp) and isinstance(node.op, ast.And):
+            for value in node.values:
+                visit(value)
+        elif isinstance(node, ast.Compare):
+            first, numbering.atoms = numbering.atoms, numbering.atoms + len(node.ops)
+            sides = [node.left, *node.comparators]
+            for k, op in enumerate(node.ops):
+                below = isinstance(op, (ast.Lt, ast.LtE))
+                small, large = (sides[k], sides[k + 1]) if below else (sides[k + 1], sides[k])
+                if isinstance(op, (ast.Lt, ast.LtE, ast.Gt, ast.GtE)) and has_abs(small) and not has_abs(large):
+                    found.add(first + k)
+        elif isinstance(node, ast.Call) and not node.keywords:
+            name = node.func.attr if isinstance(node.func, ast.Attribute) else getattr(node.func, "id", "")
+            if name in _ALL_ANY:
+                if isinstance(node.func, ast.Attribute) and not node.args:
+                    visit(node.func.value)
+                elif len(node.args) == 1:
+                    argument = node.args[0]
+                    visit(argument.elt if isinstance(argument, (ast.GeneratorExp, ast.ListComp)) else argument)
+
+    visit(test.test)
+    return found
+
+
 COMPARE = "__claim_compare__"
 _OP_TEXT = {
     ast.Lt: "<",
@@ -339,7 +387,8 @@ def judge(rows: list[dict]) -> list[dict]:
     smallest over the atoms of the slack's median over its downside spread (``downside_spread``; None: no atom
     moved, or none is ordered). An atom whose two sides kept one sign on every draw is judged on the log scale,
     where a threshold is a factor away and a ratio's long right tail does not pass for spread; any other on the
-    difference. Which scale is decided by the signs alone, before any slack is looked at."""
+    difference, and so is an error's size against a tolerance (``distance_atoms``). Which scale is decided by the
+    signs and the claim's text alone, before any slack is looked at."""
     claims: dict[tuple, dict] = {}
     for row in rows:
         key = (row["page"], int(row["line"]), row["claim"], row["env"])
@@ -366,11 +415,13 @@ def judge(rows: list[dict]) -> list[dict]:
         draws = len(claim["verdicts"])
         held = all(v == "held" for v in claim["verdicts"].values())
         spreads = None
-        for pairs in claim["slacks"].values():
+        distances = distance_atoms(claim["claim"])
+        for atom, pairs in claim["slacks"].items():
             if len(pairs) < draws:
                 continue  # not evaluated on some draw: the verdicts say it
-            # on a log scale when both sides kept one sign on every draw (a factor away), else as differences
-            logged = all(pair[1] is not None for pair in pairs)
+            # on a log scale when both sides kept one sign on every draw (a factor away), else as differences; an
+            # error's size against a tolerance always as a difference
+            logged = all(pair[1] is not None for pair in pairs) and int(atom) not in distances
             values = [pair[1] if logged else pair[0] for pair in pairs]
             if any(v is None for v in values):
                 continue
