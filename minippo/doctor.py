@@ -4,6 +4,11 @@ Reads minippo's progress.csv, Stable-Baselines3's CSV or TensorBoard log, CleanR
 export of either; minippo/doctor_logs.py reads them, and its SOURCES table maps each one's columns to minippo's names
 and units. A rule whose variable the log lacks (or has on too few updates) is reported as not checked, not as clean.
 
+Each rule compares a statistic of a variable over a window with a threshold; a relative signature adds a second
+condition on another variable. The thresholds and the healthy ranges shown beside them are not written here: they are
+in minippo/doctor_thresholds.json, which ``python -m benchmarks.doctor_calibrate calibrate`` writes from calibration
+runs only (runs of minippo, Stable-Baselines3 and CleanRL, healthy and broken, and the atlas's record).
+
 Exit status: 0 when every rule was checked and none holds, 1 when one holds, 2 on bad input, 3 when none holds but some
 rules could not be checked.
 """
@@ -12,7 +17,8 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
@@ -34,12 +40,24 @@ ANCHORS = {  # the sections of the atlas chapter that a finding sends the reader
     "atlas-discount": "no discount: γ = 1",
     "atlas-healthy": "the healthy ranges",
 }
-MIN_UPDATES = 10  # the shortest window of a rule
+MIN_UPDATES = 10  # the shortest window of a rule, and the span of a rolling median
 WINDOWS = {  # a window's name: the (first, last + 1) indices of the rows it reads, for a run of n updates
     "all updates": lambda n: (0, n),
     "updates 1-10": lambda n: (0, MIN_UPDATES),
     "the last quarter": lambda n: (n - max(1, n // 4), n),
 }
+THRESHOLDS_JSON = Path(__file__).with_name("doctor_thresholds.json")  # python -m benchmarks.doctor_calibrate calibrate
+PROBES = 'Andy Jones, "Debugging RL", https://andyljones.com/posts/rl-debugging.html'
+
+
+def _quarters(values: np.ndarray) -> tuple[float, float]:
+    """The medians of the first and of the last quarter of ``values`` (at least one value each)."""
+    quarter = max(1, len(values) // 4)
+    return float(np.median(values[:quarter])), float(np.median(values[-quarter:]))
+
+
+def _relative(difference: float, size: float) -> float:
+    return difference / size if size > 0 else 0.0  # 0/0: a variable that is 0 throughout does not change
 
 
 def _statistic(name: str, values: np.ndarray, level: float | None) -> float:
@@ -49,6 +67,18 @@ def _statistic(name: str, values: np.ndarray, level: float | None) -> float:
         return float(values[-1] - values[0])
     if name == "last over first":
         return float(values[-1] / values[0])
+    if name == "largest rolling median":  # the highest median of MIN_UPDATES consecutive updates: a sustained level
+        span = min(MIN_UPDATES, len(values))
+        return float(np.median(np.lib.stride_tricks.sliding_window_view(values, span), axis=1).max())
+    if name == "late over early":  # the last quarter's median over the first quarter's
+        early, late = _quarters(values)
+        return late / early
+    if name == "relative change":  # (late − early) / (|late| + |early|), in [−1, 1] whatever the variable's scale
+        early, late = _quarters(values)
+        return _relative(late - early, abs(late) + abs(early))
+    if name == "relative spread":  # (max − min) / (|max| + |min|), in [0, 1]: 0 for a variable that never changes
+        low, high = float(np.min(values)), float(np.max(values))
+        return _relative(high - low, abs(high) + abs(low))
     return float({"median": np.median, "min": np.min, "max": np.max, "mean": np.mean}[name](values))
 
 
@@ -58,19 +88,16 @@ def _enough(values: np.ndarray, window: list) -> bool:
 
 
 @dataclass(frozen=True)
-class Rule:
-    """One failure signature: ``statistic`` of ``variable`` over ``window`` compared with ``threshold``."""
+class Condition:
+    """``statistic`` of ``variable`` over ``window`` compared with ``threshold``: one test of a rule."""
 
-    id: str
     variable: str
     window: str  # a key of WINDOWS
-    statistic: str  # median, min, max, mean, last minus first, last over first, fraction above (``level``)
+    statistic: str  # a name _statistic knows
     comparison: str  # > or <
-    threshold: float
-    causes: tuple[str, ...]  # the likely causes, the likeliest first
-    anchor: str  # a key of ANCHORS
-    healthy: tuple[float, float]  # the statistic's range over healthy runs
+    threshold: float = math.nan  # set from minippo/doctor_thresholds.json
     level: float | None = None  # for "fraction above"
+    healthy: tuple[float, float] = (math.nan, math.nan)  # the statistic's range over healthy runs
 
     def values(self, rows: list[dict]) -> tuple[np.ndarray, list[dict]]:
         """The finite values of the variable over the window, and the window's rows."""
@@ -83,11 +110,12 @@ class Rule:
         """The statistic over the window's finite values (NaN when fewer than half of its updates, or than 2, have
         one: not enough data), and the window's first and last update."""
         values, window = self.values(rows)
-        value = _statistic(self.statistic, values, self.level) if _enough(values, window) else math.nan
+        with np.errstate(divide="ignore", invalid="ignore"):
+            value = _statistic(self.statistic, values, self.level) if _enough(values, window) else math.nan
         return value, int(window[0]["update"]), int(window[-1]["update"])
 
-    def missing(self, rows: list[dict], log: Log | None = None) -> str | None:
-        """Why the rule cannot be measured on ``rows`` (its variable missing or too sparse), or None when it can."""
+    def missing(self, rows: list[dict], rule_id: str, log: Log | None = None) -> str | None:
+        """Why the condition cannot be measured on ``rows`` (its variable missing or too sparse), or None."""
         values, window = self.values(rows)
         if _enough(values, window):
             return None
@@ -98,66 +126,153 @@ class Rule:
             state = "is empty"
         else:
             state = f"has a number on {len(values)} of the {len(window)} updates of {self.window}"
-        return f"not enough data for rule {self.id}: column {column} {state}"
+        return f"not enough data for rule {rule_id}: column {column} {state}"
 
     def holds(self, value: float) -> bool:
         return math.isfinite(value) and (value > self.threshold if self.comparison == ">" else value < self.threshold)
 
+    def describe(self) -> str:
+        level = f" {self.level:g}" if self.level is not None else ""
+        return f"{self.variable}: {self.statistic}{level}"
 
-# The rules, the most specific first. Thresholds and healthy ranges are measured on the atlas's record,
-# benchmarks/results/atlas_runs.csv (python -m benchmarks.atlas run, code at commit cdc9815: 17 modes, CartPole-v1 for
-# 150 updates and Hopper-v5 for 60, seeds 1-3, and healthy MinAtar Breakout for 200). "Healthy" below is the range of
-# the statistic over the 9 healthy runs, whole and cut to their first 10, 15 and 40 updates; a threshold sits between
-# the healthy extreme and the nearest run of the modes it names, and its comment gives both. No rule separates the
-# entropy bonus's sign, advantages left unnormalised, bootstrapping at a termination, none at a truncation, raw
-# observations or γ = 1 on Hopper from healthy runs in that record (the atlas chapter shows why).
-RULES = (
-    # the ratio fault logs approx_kl = 0 exactly at every update (CartPole and Hopper, 3 seeds each); the smallest
-    # healthy largest-KL is 1.1e-3 (CartPole, 10 updates). A run whose policy collapsed after steps far too large has
-    # a large KL first, so it is not taken for this
-    Rule("policy-never-moves", "approx_kl", "all updates", "max", "<", 1e-10,
+
+@dataclass(frozen=True)
+class Rule:
+    """One failure signature: ``statistic`` of ``variable`` over ``window`` compared with ``threshold``, and, for a
+    relative signature, a second condition ``also`` that must hold with it."""
+
+    id: str
+    variable: str
+    window: str  # a key of WINDOWS
+    statistic: str  # median, min, max, mean, last minus first, last over first, fraction above (``level``), ...
+    comparison: str  # > or <
+    threshold: float
+    causes: tuple[str, ...]  # the likely causes, the likeliest first
+    anchor: str  # a key of ANCHORS
+    healthy: tuple[float, float]  # the statistic's range over healthy runs
+    level: float | None = None  # for "fraction above"
+    also: Condition | None = None  # a second condition on another variable, which must hold too
+
+    @property
+    def condition(self) -> Condition:
+        return Condition(self.variable, self.window, self.statistic, self.comparison, self.threshold, self.level,
+                         self.healthy)  # fmt: skip
+
+    @property
+    def conditions(self) -> tuple[Condition, ...]:
+        return (self.condition,) + ((self.also,) if self.also else ())
+
+    def values(self, rows: list[dict]) -> tuple[np.ndarray, list[dict]]:
+        return self.condition.values(rows)
+
+    def measure(self, rows: list[dict]) -> tuple[float, int, int]:
+        """The first condition's statistic, and its window's first and last update (Condition.measure)."""
+        return self.condition.measure(rows)
+
+    def measure_all(self, rows: list[dict]) -> list[float]:
+        """Each condition's statistic, in order."""
+        return [condition.measure(rows)[0] for condition in self.conditions]
+
+    def missing(self, rows: list[dict], log: Log | None = None) -> str | None:
+        """Why the rule cannot be measured on ``rows`` (a variable missing or too sparse), or None when it can."""
+        return next(filter(None, (c.missing(rows, self.id, log) for c in self.conditions)), None)
+
+    def holds(self, value: float, also_value: float = math.nan) -> bool:
+        """Whether the rule holds on its statistic ``value`` and, when it has a second condition, ``also_value``."""
+        return self.condition.holds(value) and (self.also is None or self.also.holds(also_value))
+
+
+# The rules, the most specific first. Their thresholds and healthy ranges are not written here: they are set from the
+# calibration runs by ``python -m benchmarks.doctor_calibrate calibrate`` (the doctor's campaign, benchmarks/
+# doctor_runs.py, and the atlas's record), which writes minippo/doctor_thresholds.json with how each was set: between
+# the healthy runs' extreme and the nearest run of the faults the rule names. A rule the file has no threshold for is
+# left out of RULES (UNCALIBRATED names it).
+SIGNATURES = (
+    # the return (the mean of the last episodes) the same at every update, to the log's precision: the agent is paid
+    # the same (0, say) whatever it does, so there is nothing for PPO to learn from
+    Rule("not-ppo-reward", "return_mean", "all updates", "relative spread", "<", math.nan,
+         ("not PPO: the environment pays 0 (or the same) at every step; check the reward and the environment, on "
+          f"probe environments with known answers ({PROBES})",),
+         "atlas-healthy", (math.nan, math.nan)),
+    # the ratio fault logs approx_kl = 0 exactly at every update. A run whose policy collapsed after steps far too
+    # large has a large KL first, so it is not taken for this
+    Rule("policy-never-moves", "approx_kl", "all updates", "max", "<", math.nan,
          ("the ratio r_t computed against the current policy, not θ_old: r_t = 1 and the clip never engages",),
-         "atlas-ratio", (1.09e-3, 0.0203)),
-    # the entropy's last minus its first: every healthy run loses entropy (at most -0.015 nats); an entropy bonus of
-    # c2 = 0.5 on Hopper gains 2.3 nats in 10 updates, 8.2 in 60; the log-density over the wrong axis 0.73 and 2.7
-    Rule("entropy-rises", "entropy", "all updates", "last minus first", ">", 0.5,
+         "atlas-ratio", (math.nan, math.nan)),
+    # a KL far above healthy while the clip fraction stays near 0: the ratios leave [1 − ε, 1 + ε] for no sample, so
+    # ε is too wide to bind (or the clip is not applied)
+    Rule("no-clip", "approx_kl", "all updates", "median", ">", math.nan,
+         ("the clip range ε far too large, or the clip not applied: nothing holds the update near θ_old",),
+         "atlas-step-size", (math.nan, math.nan),
+         also=Condition("clip_fraction", "all updates", "median", "<")),
+    # the entropy's last minus its first: an entropy bonus far too large, or σ left without a gradient to shrink
+    Rule("entropy-rises", "entropy", "all updates", "last minus first", ">", math.nan,
          ("an entropy bonus c2 far too large, outweighing the advantages",
           "the Gaussian log-density summed over the wrong axis (the policy's own σ gets no gradient to shrink)"),
-         "atlas-entropy", (-0.961, -0.0148)),
-    # the largest approx KL: healthy at most 0.0203 (Hopper); α × 10 on Hopper 0.038 in 10 updates, α × 100 with K = 40
-    # on CartPole 0.078 in 10 (0.94 to 6.5 over 150), α × 10 on CartPole 0.033 to 0.070 over 150
-    Rule("kl-spike", "approx_kl", "all updates", "max", ">", 0.03,
+         "atlas-entropy", (math.nan, math.nan)),
+    # the highest median KL over 10 consecutive updates: a sustained burst of large steps, which a run's length does
+    # not raise as it raises a single largest KL
+    Rule("kl-spike", "approx_kl", "all updates", "largest rolling median", ">", math.nan,
          ("a step size α too large", "too many epochs K over one batch", "minibatches far too small"),
-         "atlas-step-size", (1.09e-3, 0.0203)),
-    # the median approx KL: healthy at most 0.0114 (Hopper); K = 50 on Hopper 0.0155 in 10 updates, 0.0157 over 60;
-    # α × 10 on Hopper 0.030, M = 4 on Hopper 0.0143 in 10 updates (0.0119 over 60: missed)
-    Rule("kl-high", "approx_kl", "all updates", "median", ">", 0.013,
+         "atlas-step-size", (math.nan, math.nan)),
+    Rule("kl-high", "approx_kl", "all updates", "median", ">", math.nan,
          ("too many epochs K over one batch", "a step size α too large", "minibatches far too small"),
-         "atlas-step-size", (1.48e-4, 0.0114)),
-    # the median clip fraction: healthy at most 0.169 (Hopper, 10 updates); K = 50 on Hopper 0.228
-    Rule("clip-high", "clip_fraction", "all updates", "median", ">", 0.2,
+         "atlas-step-size", (math.nan, math.nan)),
+    Rule("clip-high", "clip_fraction", "all updates", "median", ">", math.nan,
          ("too many epochs K over one batch", "a step size α too large", "minibatches far too small"),
-         "atlas-step-size", (0.0, 0.169)),
-    # the largest approx KL again, at the other end: the whole batch as one minibatch on CartPole (one Adam step an
-    # epoch) moves the policy by at most 9.7e-5; the smallest healthy largest-KL is 1.09e-3
-    Rule("policy-barely-moves", "approx_kl", "all updates", "max", "<", 3e-4,
+         "atlas-step-size", (math.nan, math.nan)),
+    # the entropy falling to a small share of its start (a Gaussian's may cross 0: a negative share) while the return
+    # does not rise: the policy turned certain without learning
+    Rule("entropy-collapse", "entropy", "all updates", "late over early", "<", math.nan,
+         ("an entropy coefficient with the wrong sign (c2 < 0): the bonus pushes the policy towards certainty",),
+         "atlas-entropy", (math.nan, math.nan),
+         also=Condition("return_mean", "all updates", "relative change", "<")),
+    # the largest approx KL at the other end: the whole batch as one minibatch (one Adam step an epoch)
+    Rule("policy-barely-moves", "approx_kl", "all updates", "max", "<", math.nan,
          ("minibatches far too large: a handful of Adam steps per batch", "a step size α far too small"),
-         "atlas-minibatch", (1.09e-3, 0.0203)),
-    # the median explained variance: healthy at least -0.031 (CartPole, 10 updates: its critic learns slowly in the
-    # book's setting); the value loss's sign flipped on Hopper -4.5 and below, stale value targets on Hopper -1.35 (one
-    # seed of 3 over 60 updates). Set at -1, a whole unit below every healthy run
-    Rule("critic-worse-than-constant", "explained_variance", "all updates", "median", "<", -1.0,
+         "atlas-minibatch", (math.nan, math.nan)),
+    Rule("critic-worse-than-constant", "explained_variance", "all updates", "median", "<", math.nan,
          ("the value loss added with the wrong sign: the critic ascends its squared error",
+          "the value loss weighted 0 (c1 = 0): the critic is never trained",
           "value targets computed once and never refreshed (stale)"),
-         "atlas-value-loss", (-0.031, 0.99)),
-    # the last update's value loss over the first's: healthy at most 2.23 (CartPole, 10 updates); the value loss's
-    # sign flipped on CartPole 3.2 at 40 updates, Hopper without reward scaling from 10 updates on, γ = 1 on CartPole
-    # (2 seeds of 3)
-    Rule("value-loss-grows", "value_loss", "all updates", "last over first", ">", 2.7,
+         "atlas-value-loss", (math.nan, math.nan)),
+    Rule("value-loss-grows", "value_loss", "all updates", "last over first", ">", math.nan,
          ("the value loss added with the wrong sign: the critic ascends its squared error",
           "returns growing faster than the critic follows (rewards not scaled, γ = 1)"),
-         "atlas-value-loss", (0.0031, 2.23)),
+         "atlas-value-loss", (math.nan, math.nan)),
 )  # fmt: skip
+
+
+def load_thresholds(path=THRESHOLDS_JSON) -> dict:
+    """The calibrated thresholds: {"rules": {rule id: {"threshold", "healthy", "also": {...}}}, and how they were
+    set}; an empty table when the file is missing."""
+    try:
+        return json.loads(Path(path).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return {"rules": {}}
+
+
+def calibrated(signatures=SIGNATURES, table: dict | None = None) -> tuple[Rule, ...]:
+    """The rules of ``signatures`` that ``table`` (load_thresholds()) has thresholds for, with them."""
+    table = load_thresholds() if table is None else table
+    rules = []
+    for rule in signatures:
+        entry = table["rules"].get(rule.id)
+        if entry is None or (rule.also is None) != ("also" not in entry):
+            continue
+        also = rule.also and replace(rule.also, threshold=entry["also"]["threshold"],
+                                     healthy=tuple(entry["also"]["healthy"]))  # fmt: skip
+        rules.append(replace(rule, threshold=entry["threshold"], healthy=tuple(entry["healthy"]), also=also))
+    return tuple(rules)
+
+
+THRESHOLDS = load_thresholds()
+RULES = calibrated(SIGNATURES, THRESHOLDS)
+UNCALIBRATED = tuple(rule.id for rule in SIGNATURES if rule.id not in {r.id for r in RULES})
+
+
+def _range(low_high) -> str:
+    return "–".join(f"{x:.4g}" for x in low_high)
 
 
 @dataclass(frozen=True)
@@ -166,13 +281,18 @@ class Finding:
     value: float
     first_update: int
     last_update: int
+    also_value: float = math.nan  # the second condition's statistic, for a rule that has one
 
     def lines(self) -> list[str]:
-        rule, low_high = self.rule, "–".join(f"{x:.4g}" for x in self.rule.healthy)
-        level = f" {rule.level:g}" if rule.level is not None else ""
-        return [
-            f"{rule.variable}: {rule.statistic}{level} over updates {self.first_update}-{self.last_update} is "
-            f"{self.value:.4g} ({rule.comparison} {rule.threshold:g}; healthy runs: {low_high})  [{rule.id}]",
+        rule = self.rule
+        lines = [f"{rule.condition.describe()} over updates {self.first_update}-{self.last_update} is "
+                 f"{self.value:.4g} ({rule.comparison} {rule.threshold:.4g}; healthy runs: {_range(rule.healthy)})  "
+                 f"[{rule.id}]"]  # fmt: skip
+        if rule.also:
+            also = rule.also
+            lines += [f"  and {also.describe()} over {also.window} is {self.also_value:.4g} ({also.comparison} "
+                      f"{also.threshold:.4g}; healthy runs: {_range(also.healthy)})"]  # fmt: skip
+        return lines + [
             "  likely causes, likeliest first: " + "; ".join(rule.causes),
             f"  read: {CHAPTER}#{rule.anchor} ({ANCHORS[rule.anchor]})",
         ]
@@ -192,8 +312,9 @@ def diagnose(rows: list[dict], rules=RULES) -> list[Finding]:
     findings = []
     for rule in rules:
         value, first, last = rule.measure(rows)
-        if rule.holds(value):
-            findings.append(Finding(rule, value, first, last))
+        also_value = rule.also.measure(rows)[0] if rule.also else math.nan
+        if rule.holds(value, also_value):
+            findings.append(Finding(rule, value, first, last, also_value))
     return findings
 
 
@@ -211,17 +332,19 @@ def report(path, as_json: bool = False) -> tuple[str, int]:
     if all(missing.values()):
         reasons = dict.fromkeys(reason.split(": ", 1)[1] for reason in missing.values())
         raise MinippoError(f"{path}: not enough data for any rule: " + "; ".join(reasons))
-    measured = [(rule, *rule.measure(rows)) for rule in RULES]
+    measured = [(rule, *rule.measure(rows), rule.also.measure(rows)[0] if rule.also else math.nan) for rule in RULES]
     status = 1 if findings else 3 if any(missing.values()) else 0
     if as_json:
 
-        def described(rule, value, first, last):
-            return {**asdict(rule), "value": _finite(value), "updates": [first, last], "found": rule.holds(value),
+        def described(rule, value, first, last, also_value):
+            return {**asdict(rule), "value": _finite(value), "updates": [first, last],
+                    "also_value": _finite(also_value) if rule.also else None, "found": rule.holds(value, also_value),
                     "missing": missing[rule.id], "read": f"{CHAPTER}#{rule.anchor}"}  # fmt: skip
 
         text = json.dumps({"run": str(path), "format": log.source, "file": log.file, "updates": len(rows),
                            "notes": log.notes,
-                           "findings": [described(f.rule, f.value, f.first_update, f.last_update) for f in findings],
+                           "findings": [described(f.rule, f.value, f.first_update, f.last_update, f.also_value)
+                                        for f in findings],
                            "checked": [described(*m) for m in measured],
                            "not_checked": [rule.id for rule in RULES if missing[rule.id]]},
                           indent=1, allow_nan=False)  # fmt: skip
@@ -240,9 +363,12 @@ def report(path, as_json: bool = False) -> tuple[str, int]:
         by = f"by the {len(checked)} rules of {len(RULES)} that could be checked " if len(checked) < len(RULES) else ""
         lines += [f"no failure signature found {by}in {len(rows)} updates; what was checked, against the healthy "
                   f"ranges ({CHAPTER}#atlas-healthy):"]  # fmt: skip
-        for rule, value, first, last in checked:
-            low, high = rule.healthy
-            lines += [f"  {rule.variable}: {rule.statistic} over updates {first}-{last} = {value:.4g} (flagged "
-                      f"{rule.comparison} {rule.threshold:g}; healthy runs: {low:.4g}–{high:.4g})"]  # fmt: skip
+        for rule, value, first, last, also_value in checked:
+            line = (f"  {rule.condition.describe()} over updates {first}-{last} = {value:.4g} (flagged "
+                    f"{rule.comparison} {rule.threshold:.4g}; healthy runs: {_range(rule.healthy)})")
+            if rule.also:
+                line += (f", with {rule.also.describe()} = {also_value:.4g} (flagged {rule.also.comparison} "
+                         f"{rule.also.threshold:.4g}; healthy runs: {_range(rule.also.healthy)})  [{rule.id}]")
+            lines += [line]
     lines += [reason for reason in missing.values() if reason]
     return "\n".join(lines), status
