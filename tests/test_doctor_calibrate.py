@@ -1,0 +1,206 @@
+"""The doctor's thresholds: set on calibration runs only, between the healthy runs and the broken ones, read back by
+the doctor; its new rules on runs made of rows; evaluate's confusion counts."""
+
+import csv
+import json
+import math
+
+import numpy as np
+import pytest
+
+from benchmarks import doctor_calibrate as dc
+from minippo import doctor
+from minippo.records import write_rows
+from minippo.run_folder import PROGRESS_FIELDS
+
+N = 40  # updates of a synthetic run
+
+
+def rows_of(n: int = N, **values) -> list[dict]:
+    """n updates whose debug variables sit in the healthy ranges, a learning return and a slowly falling entropy,
+    with ``values`` (a number or a list) instead."""
+    rows = [{"update": i + 1, "step": 512 * (i + 1), "return_mean": 20.0 + 5 * i, "approx_kl": 0.004 + 0.001 * (i % 3),
+             "clip_fraction": 0.05 + 0.01 * (i % 2), "entropy": 0.69 - 0.005 * i, "value_loss": 20.0,
+             "explained_variance": 0.5} for i in range(n)]  # fmt: skip
+    for key, value in values.items():
+        for i, row in enumerate(rows):
+            row[key] = value[i] if isinstance(value, (list, np.ndarray)) else value
+    return rows
+
+
+# (fault, part, rows): a small campaign, each fault's signature plain
+CAMPAIGN = [
+    ("healthy", "calibration", rows_of()),
+    ("healthy", "calibration", rows_of(approx_kl=0.008, clip_fraction=0.1, entropy=list(np.linspace(0.69, 0.3, N)))),
+    ("clip_10", "calibration", rows_of(approx_kl=0.5, clip_fraction=0.001)),
+    ("lr_x30", "calibration", rows_of(approx_kl=0.09, clip_fraction=0.35)),
+    ("ent_-0.05", "calibration", rows_of(entropy=list(np.linspace(0.69, 0.01, N)), return_mean=20.0)),
+    ("reward_zero", "calibration", rows_of(return_mean=0.0, explained_variance=-3.0)),
+    ("vf_0", "calibration", rows_of(explained_variance=-3.0)),
+    ("healthy", "held-out", rows_of(approx_kl=0.9, clip_fraction=0.9, entropy=0.01, explained_variance=-50.0)),
+]
+CAUSES = {"healthy": "", "clip_10": "no-clip", "lr_x30": "kl-spike", "ent_-0.05": "entropy-collapse",
+          "reward_zero": "not-ppo-reward", "vf_0": "critic-worse-than-constant"}  # fmt: skip
+
+
+def campaign(root, runs=CAMPAIGN):
+    """A manifest, a record and run folders (minippo's progress.csv) of ``runs`` under ``root``."""
+    entries = []
+    for number, (fault, part, rows) in enumerate(runs):
+        run_id = f"minippo-defaults-CartPole-v1-{fault}-1x-seed{number}"
+        folder = root / "runs" / run_id
+        folder.mkdir(parents=True)
+        write_rows(folder / "progress.csv", PROGRESS_FIELDS,
+                   [{key: row.get(key, 0) for key in PROGRESS_FIELDS} for row in rows])  # fmt: skip
+        entries.append({"id": run_id, "part": part, "library": "minippo", "settings": "defaults",
+                        "task": "CartPole-v1", "fault": fault, "cause": CAUSES[fault]})  # fmt: skip
+    write_rows(root / "manifest.csv", list(entries[0]), entries)
+    (root / "record.json").write_text(json.dumps({"commands": [], "runs": [{"id": e["id"]} for e in entries]}))
+    return root / "runs", root / "record.json", root / "manifest.csv"
+
+
+def calibrated_rules(root, runs=CAMPAIGN) -> tuple:
+    folder, record, manifest = campaign(root, runs)
+    table = dc.calibrate(folder, record, manifest, None, root / "thresholds.json", [])
+    return doctor.calibrated(doctor.SIGNATURES, table), table
+
+
+def test_calibrate_never_opens_a_held_out_run_and_its_extremes_move_no_threshold(tmp_path, monkeypatch):
+    opened = []
+    read_log = dc.read_log
+    monkeypatch.setattr(dc, "read_log", lambda path: opened.append(path.name) or read_log(path))
+    _, with_held_out = calibrated_rules(tmp_path / "with")
+    assert opened and not any("seed7" in name for name in opened)  # the held-out run's folder
+    _, without = calibrated_rules(tmp_path / "without", CAMPAIGN[:-1])
+    assert with_held_out["rules"] == without["rules"]
+    assert with_held_out["runs"]["calibration"]["campaign healthy"] == 2
+    assert with_held_out["runs"]["held-out"] == {"read": 0, "in the manifest": 1}
+
+
+def test_thresholds_refuse_a_run_of_another_part():
+    run = dc.Run("x", "campaign", "held-out", "minippo", "CartPole-v1", "healthy", "", rows_of())
+    with pytest.raises(dc.common.BenchmarkError, match="calibration runs only"):
+        dc.thresholds([run])
+
+
+def test_a_cut_lies_between_the_healthy_extreme_and_the_nearest_broken_run():
+    geometric = dc.cut([0.001, 0.01], [0.04, 0.5], ">", "log")
+    assert geometric["threshold"] == pytest.approx(0.02) and geometric["basis"] == "midpoint"
+    assert dc.cut([-0.1, 0.5], [-2.0, -3.0], "<", "linear")["threshold"] == pytest.approx(-1.05)
+    near = dc.cut([0.001, 0.01], [0.015, 0.5], ">", "log")  # within a factor 2: the margin wins, 0.015 is missed
+    assert near["threshold"] == pytest.approx(0.02) and near["basis"].startswith("margin")
+    zero = dc.cut([0.02, 0.5], [0.0], "<", "log")  # 0 counts as FLOOR on a log scale
+    assert zero["threshold"] == pytest.approx(math.sqrt(0.02 * dc.FLOOR))
+
+
+def test_each_calibrated_threshold_lies_between_its_healthy_and_broken_runs(tmp_path):
+    _, table = calibrated_rules(tmp_path)
+    assert {"not-ppo-reward", "no-clip", "kl-spike", "entropy-collapse", "critic-worse-than-constant"} <= set(
+        table["rules"])
+    for rule in doctor.SIGNATURES:
+        entry = table["rules"].get(rule.id)
+        for condition, part in zip(rule.conditions, [entry, entry and entry.get("also")]):
+            if part is None:
+                continue
+            test = doctor.Condition(condition.variable, condition.window, condition.statistic, condition.comparison,
+                                    part["threshold"])  # fmt: skip
+            if part["nearest_negative"] is not None:  # what it must not flag, it does not
+                assert not test.holds(part["nearest_negative"]), rule.id
+            if part["basis"] == "midpoint":  # strictly between that and the nearest broken run, which it flags
+                low, high = sorted([part["nearest_negative"], part["nearest_broken"]])
+                assert low < part["threshold"] < high and test.holds(part["nearest_broken"]), rule.id
+    kl = table["rules"]["kl-spike"]  # the healthy runs' largest KL 0.008, the step size's 0.09: their geometric mean
+    assert kl["threshold"] == pytest.approx(math.sqrt(0.008 * 0.09)) and kl["healthy"][1] == pytest.approx(0.008)
+
+
+def test_the_shipped_thresholds_cover_every_rule_and_flag_no_healthy_extreme():
+    table = doctor.load_thresholds()
+    assert doctor.UNCALIBRATED == () and len(doctor.RULES) == len(doctor.SIGNATURES)
+    assert {"command", "commit", "date", "runs", "principle"} <= set(table)
+    assert table["runs"]["held-out"]["read"] == 0
+    for rule in doctor.RULES:
+        assert all(math.isfinite(condition.threshold) for condition in rule.conditions), rule.id
+        if rule.also is None:  # a relative signature's conditions hold on healthy runs one at a time, not together
+            assert not any(rule.holds(x) for x in rule.healthy), rule.id
+
+
+def test_the_thresholds_file_round_trips(tmp_path):
+    rules, table = calibrated_rules(tmp_path)
+    read = doctor.load_thresholds(tmp_path / "thresholds.json")
+    assert read == json.loads(json.dumps(table))
+    again = doctor.calibrated(doctor.SIGNATURES, read)
+    assert again == rules and [rule.id for rule in again] == [r.id for r in doctor.SIGNATURES if r.id in read["rules"]]
+    for rule in again:
+        entry = read["rules"][rule.id]
+        assert rule.threshold == entry["threshold"] and list(rule.healthy) == entry["healthy"]
+        if rule.also:
+            assert rule.also.threshold == entry["also"]["threshold"]
+    assert doctor.calibrated(doctor.SIGNATURES, {"rules": {}}) == ()  # no file: no rule claims a clean bill
+
+
+@pytest.fixture(scope="module")
+def rules(tmp_path_factory):
+    return calibrated_rules(tmp_path_factory.mktemp("calibrated"))[0]
+
+
+def first(rules, rows) -> str:
+    found = doctor.diagnose(rows, rules)
+    return found[0].rule.id if found else "none"
+
+
+def test_a_high_kl_with_the_clip_fraction_near_0_is_no_clip_not_a_step_size(rules):
+    assert first(rules, rows_of(approx_kl=0.6, clip_fraction=0.0005)) == "no-clip"
+    assert first(rules, rows_of(approx_kl=0.12, clip_fraction=0.4)) == "kl-spike"  # the clip at work: a step size
+    assert first(rules, rows_of(approx_kl=0.005, clip_fraction=0.0)) == "none"  # a clip fraction of 0 alone is fine
+
+
+def test_entropy_falling_to_0_while_the_return_stays_flat_is_entropy_collapse(rules):
+    collapse = rows_of(entropy=list(np.linspace(0.7, 0.005, N)), return_mean=list(20 + np.sin(np.arange(N))))
+    assert first(rules, collapse) == "entropy-collapse"
+    learning = rows_of(entropy=list(np.linspace(0.7, 0.005, N)))  # the same fall with a rising return
+    assert "entropy-collapse" not in [f.rule.id for f in doctor.diagnose(learning, rules)]
+    assert first(rules, rows_of()) == "none"
+
+
+def test_a_return_that_never_changes_is_not_ppo(rules):
+    assert first(rules, rows_of(return_mean=0.0)) == "not-ppo-reward"
+    assert first(rules, rows_of(return_mean=-500.0)) == "not-ppo-reward"  # the same every update, whatever its level
+    assert first(rules, rows_of(return_mean=list(-500.0 + 5 * (np.arange(N) % 2)))) == "none"
+
+
+def test_kl_spike_reads_a_sustained_level_not_one_update_so_a_longer_run_does_not_trip_it(rules):
+    long = rows_of(400)
+    for i in (50, 180, 333):  # single updates far above every healthy KL
+        long[i]["approx_kl"] = 0.5
+    assert first(rules, long) == "none"
+    burst = rows_of(400, approx_kl=[0.004] * 200 + [0.2] * 12 + [0.004] * 188)
+    assert first(rules, burst) == "kl-spike"
+
+
+def test_evaluate_counts_false_alarms_recall_and_the_right_cause_first(tmp_path):
+    runs = [("healthy", "calibration", rows_of()),
+            ("healthy", "calibration", rows_of(approx_kl=0.3, clip_fraction=0.4)),  # a false alarm: kl-spike
+            ("clip_10", "calibration", rows_of(approx_kl=0.6, clip_fraction=0.001)),  # named right: no-clip
+            ("clip_10", "calibration", rows_of(approx_kl=0.3, clip_fraction=0.4)),  # flagged, the wrong cause
+            ("vf_0", "calibration", rows_of()),  # missed
+            ("lr_x30", "held-out", rows_of(approx_kl=0.3, clip_fraction=0.4))]  # of the other part: not counted
+    folder, record, manifest = campaign(tmp_path, runs)
+    table = {"rules": {
+        "no-clip": {"threshold": 0.1, "healthy": [0.001, 0.01], "also": {"threshold": 0.01, "healthy": [0.0, 0.2]}},
+        "kl-spike": {"threshold": 0.1, "healthy": [0.001, 0.01]},
+        "critic-worse-than-constant": {"threshold": -1.0, "healthy": [0.0, 1.0]}}}  # fmt: skip
+    (tmp_path / "thresholds.json").write_text(json.dumps(table))
+    text = dc.evaluate("calibration", folder, record, manifest, tmp_path / "thresholds.json", tmp_path / "out.csv")
+    with open(tmp_path / "out.csv", newline="") as handle:
+        rows = {(row["kind"], row["name"]): row for row in csv.DictReader(handle)}
+    overall = rows["overall", "all runs"]
+    assert (overall["healthy_runs"], overall["false_alarms"], overall["broken_runs"], overall["flagged"],
+            overall["first_right"], overall["first_rule_expected"]) == ("2", "1", "3", "2", "1", "1")  # fmt: skip
+    assert (rows["rule", "kl-spike"]["false_alarms"], rows["rule", "kl-spike"]["broken_runs"]) == ("1", "0")
+    assert (rows["rule", "no-clip"]["flagged"], rows["rule", "no-clip"]["broken_runs"]) == ("1", "2")
+    assert (rows["fault", "clip_10"]["flagged"], rows["fault", "clip_10"]["first_right"]) == ("2", "1")
+    assert rows["rule", "critic-worse-than-constant"]["flagged"] == "0"
+    assert "| healthy runs flagged (false alarms) | 1/2 (50%) |" in text
+    assert "| the right cause named first | 1/3 (33%) |" in text
+    assert dc.verdicts_path(tmp_path / "out.csv").exists()
+    assert dc.verdicts_path(dc.common.RESULTS / "doctor_confusion_held-out.csv").name == "doctor_verdicts_held-out.csv"
