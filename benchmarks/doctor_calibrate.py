@@ -20,7 +20,8 @@ still in progress; a broken run whole. Each condition of a rule gets its thresho
   misses that run rather than risk a false alarm on a healthy run the calibration did not see.
 
 A rule with a second condition (a relative signature: the KL high while the clip fraction stays low) is there to tell
-its cause from others that share the first variable, so it must flag no other calibration run, healthy or broken.
+its cause from others that share the first variable, so it must flag no healthy run and no run of another fault that
+the rules before it (the doctor reads them in order) do not already flag.
 Its second condition's cut is tried at each run of the rule's faults in turn; at each, the first condition's
 threshold is set by the principle above against the other runs the second lets through, and the cut that lets the
 rule catch the most runs of its faults is kept (the tightest, on a tie). The second condition's threshold is then set
@@ -57,7 +58,8 @@ PREFIXES = (10, 15, 40)  # a healthy run is also measured cut to its first updat
 FLOOR = 1e-6  # 0 on a log scale: the precision of a progress.csv rounded to 6 significant digits
 MARGIN = {"log": math.log10(2), "linear": 0.1}
 POSITIVE = {"approx_kl", "clip_fraction", "value_loss"}  # variables that are never negative
-LOG_STATISTICS = {"max", "min", "median", "mean", "largest rolling median", "last over first", "late over early"}
+LOG_STATISTICS = {"max", "min", "median", "mean", "largest rolling median", "last over first",
+                  "last quarter over first"}
 
 # the faults each rule names among its causes: the campaign's (doctor_runs.FAULTS) and the atlas's modes
 # (atlas.FAULTS). The step-size rules name the same three causes in different orders
@@ -199,15 +201,19 @@ def _range(values) -> list:
     return [float(values.min()), float(values.max())] if len(values) else [math.nan, math.nan]
 
 
-def calibrate_rule(rule: doctor.Rule, measured: list[tuple[Run, list[float]]]) -> dict | None:
+def calibrate_rule(rule: doctor.Rule, measured: list[tuple[Run, list[float]]], earlier=None) -> dict | None:
     """The thresholds of ``rule`` from ``measured`` ((run, the statistic of each condition) per sample), or None when
-    no sample of its faults has its statistics."""
+    no sample of its faults has its statistics. ``earlier``: per sample, whether a rule before this one flags it (a
+    broken run so flagged is not one a relative signature must keep clear of)."""
     named = set(FAULTS_NAMED[rule.id])
     conditions = rule.conditions
-    finite = [(run, values) for run, values in measured if all(math.isfinite(v) for v in values)]
-    healthy = np.array([values for run, values in finite if run.healthy]).reshape(-1, len(conditions))
-    broken = np.array([values for run, values in finite if run.fault in named]).reshape(-1, len(conditions))
-    others = np.array([values for run, values in finite if run.fault not in named]).reshape(-1, len(conditions))
+    earlier = [False] * len(measured) if earlier is None else earlier
+    finite = [(run, values, before) for (run, values), before in zip(measured, earlier)
+              if all(math.isfinite(v) for v in values)]  # fmt: skip
+    healthy = np.array([values for run, values, _ in finite if run.healthy]).reshape(-1, len(conditions))
+    broken = np.array([values for run, values, _ in finite if run.fault in named]).reshape(-1, len(conditions))
+    others = np.array([values for run, values, before in finite if run.fault not in named
+                       and (run.healthy or not before)]).reshape(-1, len(conditions))  # fmt: skip
     if len(broken) == 0 or len(healthy) == 0:
         return None
     first, scale = conditions[0], scale_of(conditions[0])
@@ -249,11 +255,15 @@ def thresholds(runs: list[Run], signatures=doctor.SIGNATURES) -> dict:
                                     f"part were given ({foreign[0]}, ...)")  # fmt: skip
     table = {}
     sampled = samples(runs)
+    earlier = [False] * len(sampled)  # per sample: flagged by a rule before the one being set
     for rule in signatures:
         measured = [(run, [condition.measure(rows)[0] for condition in rule.conditions]) for run, rows in sampled]
-        entry = calibrate_rule(rule, measured)
-        if entry is not None:
-            table[rule.id] = entry
+        entry = calibrate_rule(rule, measured, earlier)
+        if entry is None:
+            continue
+        table[rule.id] = entry
+        (set_rule,) = doctor.calibrated([rule], {"rules": {rule.id: entry}})
+        earlier = [before or set_rule.holds(*values) for before, (_, values) in zip(earlier, measured)]
     return table
 
 

@@ -50,10 +50,9 @@ THRESHOLDS_JSON = Path(__file__).with_name("doctor_thresholds.json")  # python -
 PROBES = 'Andy Jones, "Debugging RL", https://andyljones.com/posts/rl-debugging.html'
 
 
-def _quarters(values: np.ndarray) -> tuple[float, float]:
-    """The medians of the first and of the last quarter of ``values`` (at least one value each)."""
-    quarter = max(1, len(values) // 4)
-    return float(np.median(values[:quarter])), float(np.median(values[-quarter:]))
+def _start_and_end(values: np.ndarray) -> tuple[float, float]:
+    """The first value, where the run started, and the median of the last quarter, where it ended up."""
+    return float(values[0]), float(np.median(values[-max(1, len(values) // 4) :]))
 
 
 def _relative(difference: float, size: float) -> float:
@@ -70,12 +69,12 @@ def _statistic(name: str, values: np.ndarray, level: float | None) -> float:
     if name == "largest rolling median":  # the highest median of MIN_UPDATES consecutive updates: a sustained level
         span = min(MIN_UPDATES, len(values))
         return float(np.median(np.lib.stride_tricks.sliding_window_view(values, span), axis=1).max())
-    if name == "late over early":  # the last quarter's median over the first quarter's
-        early, late = _quarters(values)
-        return late / early
-    if name == "relative change":  # (late − early) / (|late| + |early|), in [−1, 1] whatever the variable's scale
-        early, late = _quarters(values)
-        return _relative(late - early, abs(late) + abs(early))
+    if name == "last quarter over first":  # the last quarter's median over the first value
+        start, end = _start_and_end(values)
+        return end / start
+    if name == "change from first":  # (end − start) / (|end| + |start|), in [−1, 1] whatever the variable's scale
+        start, end = _start_and_end(values)
+        return _relative(end - start, abs(end) + abs(start))
     if name == "relative spread":  # (max − min) / (|max| + |min|), in [0, 1]: 0 for a variable that never changes
         low, high = float(np.min(values)), float(np.max(values))
         return _relative(high - low, abs(high) + abs(low))
@@ -223,10 +222,10 @@ SIGNATURES = (
          "atlas-step-size", (math.nan, math.nan)),
     # the entropy falling to a small share of its start (a Gaussian's may cross 0: a negative share) while the return
     # does not rise: the policy turned certain without learning
-    Rule("entropy-collapse", "entropy", "all updates", "late over early", "<", math.nan,
+    Rule("entropy-collapse", "entropy", "all updates", "last quarter over first", "<", math.nan,
          ("an entropy coefficient with the wrong sign (c2 < 0): the bonus pushes the policy towards certainty",),
          "atlas-entropy", (math.nan, math.nan),
-         also=Condition("return_mean", "all updates", "relative change", "<")),
+         also=Condition("return_mean", "all updates", "change from first", "<")),
     # the largest approx KL at the other end: the whole batch as one minibatch (one Adam step an epoch)
     Rule("policy-barely-moves", "approx_kl", "all updates", "max", "<", math.nan,
          ("minibatches far too large: a handful of Adam steps per batch", "a step size α far too small"),
