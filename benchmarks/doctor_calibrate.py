@@ -54,6 +54,7 @@ RUN_ROOT = common.RUNS / "doctor"
 ATLAS_CSV = common.RESULTS / "atlas_runs.csv"
 PARTS = ("calibration", "held-out")
 CALIBRATION = "calibration"
+CODE = ("minippo", "benchmarks/doctor_calibrate.py", ":(exclude)minippo/doctor_thresholds.json")  # what sets them
 PREFIXES = (10, 15, 40)  # a healthy run is also measured cut to its first updates
 FLOOR = 1e-6  # 0 on a log scale: the precision of a progress.csv rounded to 6 significant digits
 MARGIN = {"log": math.log10(2), "linear": 0.1}
@@ -278,7 +279,7 @@ def calibrate(runs_dir: Path, record_json: Path | None, manifest_csv: Path, atla
               "in the manifest": sum(e["part"] == CALIBRATION for e in manifest), **left_out}  # fmt: skip
     record = {
         "command": common.invocation("doctor_calibrate", argv),
-        "commit": common.git_commit(("minippo", "benchmarks/doctor_calibrate.py")),
+        "commit": common.git_commit(CODE),
         "date": datetime.date.today().isoformat(),
         "runs": {CALIBRATION: counts, "held-out": {"read": 0, "in the manifest": len(manifest) - counts[
             "in the manifest"]}},  # fmt: skip
