@@ -143,7 +143,8 @@ class Rule:
     id: str
     variable: str
     window: str  # a key of WINDOWS
-    statistic: str  # median, min, max, mean, last minus first, last over first, fraction above (``level``), ...
+    statistic: str  # median, min, max, mean, last minus first, last over first, fraction above (``level``), largest
+    # rolling median, last quarter over first, change from first, relative spread (_statistic)
     comparison: str  # > or <
     threshold: float
     causes: tuple[str, ...]  # the likely causes, the likeliest first

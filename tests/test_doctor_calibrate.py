@@ -204,3 +204,13 @@ def test_evaluate_counts_false_alarms_recall_and_the_right_cause_first(tmp_path)
     assert "| the right cause named first | 1/3 (33%) |" in text
     assert dc.verdicts_path(tmp_path / "out.csv").exists()
     assert dc.verdicts_path(dc.common.RESULTS / "doctor_confusion_held-out.csv").name == "doctor_verdicts_held-out.csv"
+
+
+def test_each_rule_names_faults_that_exist_and_each_campaign_fault_is_named_by_the_rule_it_expects():
+    from benchmarks.doctor_runs import FAULTS
+
+    atlas_modes = set(json.loads((dc.common.RESULTS / "atlas_runs.json").read_text())["modes"])
+    assert set(dc.FAULTS_NAMED) == {rule.id for rule in doctor.SIGNATURES}
+    assert set().union(*dc.FAULTS_NAMED.values()) <= set(FAULTS) | atlas_modes
+    for fault, (_, _, cause, _) in FAULTS.items():
+        assert fault in dc.FAULTS_NAMED[cause], fault
