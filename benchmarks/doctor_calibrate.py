@@ -123,9 +123,9 @@ def read_part(part: str, runs_dir: Path, manifest_csv: Path = MANIFEST_CSV, reco
             continue
         try:
             rows = read_log(runs_dir / entry["id"]).rows
-        except MinippoError:
-            rows = []
-        if len(rows) < doctor.MIN_UPDATES:
+        except MinippoError as error:
+            raise common.BenchmarkError(f"run {entry['id']} is recorded but its log cannot be read: {error}") from None
+        if len(rows) < doctor.MIN_UPDATES:  # a run stopped early by a non-finite loss: too short to judge
             left_out["under 10 updates"] = left_out.get("under 10 updates", 0) + 1
             continue
         runs.append(Run(entry["id"], "campaign", entry["part"], entry["library"], entry["task"], entry["fault"],
