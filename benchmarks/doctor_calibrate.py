@@ -99,12 +99,12 @@ class Run:
 # ---- reading the runs of one part
 
 
-def recorded_ids(record_json: Path) -> set:
-    """The ids of the runs the campaign's record holds (made, or stopped by a non-finite loss): a run folder without
-    a line there is still being written."""
+def recorded_ids(record_json: Path) -> dict:
+    """{id: outcome} of the runs the campaign's record holds ("ok", or "stopped: ..." by a non-finite loss): a run
+    folder without a line there is still being written."""
     if not record_json.exists():
         raise common.BenchmarkError(f"no record {record_json}: which run folders are finished is not known")
-    return {run["id"] for run in json.loads(record_json.read_text())["runs"]}
+    return {run["id"]: run.get("outcome", "ok") for run in json.loads(record_json.read_text())["runs"]}
 
 
 def read_part(part: str, runs_dir: Path, manifest_csv: Path = MANIFEST_CSV, record_json: Path | None = None):
@@ -124,7 +124,10 @@ def read_part(part: str, runs_dir: Path, manifest_csv: Path = MANIFEST_CSV, reco
         try:
             rows = read_log(runs_dir / entry["id"]).rows
         except MinippoError as error:
-            raise common.BenchmarkError(f"run {entry['id']} is recorded but its log cannot be read: {error}") from None
+            if done[entry["id"]] == "ok":
+                raise common.BenchmarkError(f"run {entry['id']} is recorded but its log cannot be read: "
+                                            f"{error}") from None  # fmt: skip
+            rows = []  # stopped before its log had a row
         if len(rows) < doctor.MIN_UPDATES:  # a run stopped early by a non-finite loss: too short to judge
             left_out["under 10 updates"] = left_out.get("under 10 updates", 0) + 1
             continue
