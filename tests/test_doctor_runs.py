@@ -78,7 +78,13 @@ def test_the_zero_reward_is_zero_through_each_librarys_wrappers():
     for env in (doctor_runs.make_task("CartPole-v1", True),
                 cleanrl_ppo.wrapped(lambda: doctor_runs.make_task("Pendulum-v1", True), True, 0.99)):  # fmt: skip
         env.reset(seed=0)
-        assert [env.step(env.action_space.sample())[1] for _ in range(20)] == [0.0] * 20
+        rewards = []
+        for _ in range(20):
+            _, reward, terminated, truncated, _ = env.step(env.action_space.sample())
+            rewards.append(reward)
+            if terminated or truncated:
+                env.reset()
+        assert rewards == [0.0] * 20
         env.close()
 
 
