@@ -111,12 +111,14 @@ class _Atoms:
 
     def __init__(self):
         self.atoms = 0
+        self.compared: list[tuple[int, ast.Compare]] = []  # each comparison met, with the number of its first atom
 
     def claim(self, test: ast.expr, reduce: str = "min") -> ast.expr:
         if isinstance(test, ast.BoolOp) and isinstance(test.op, ast.And):
             return ast.BoolOp(ast.And(), [self.claim(value, reduce) for value in test.values])
         if isinstance(test, ast.Compare):
             first, self.atoms = self.atoms, self.atoms + len(test.ops)
+            self.compared.append((first, test))
             ops = ast.Tuple([ast.Constant(_OP_TEXT[type(op)]) for op in test.ops], ast.Load())
             return ast.Call(
                 ast.Name(COMPARE, ast.Load()),
@@ -161,30 +163,15 @@ def distance_atoms(claim: str) -> set[int]:
         return False
 
     found: set[int] = set()
-    numbering = _Atoms()  # only its count, which numbers the comparisons as the recorded claim's
-
-    def visit(node: ast.expr) -> None:
-        if isinstance(node, ast.BoolOp) and isinstance(node.op, ast.And):
-            for value in node.values:
-                visit(value)
-        elif isinstance(node, ast.Compare):
-            first, numbering.atoms = numbering.atoms, numbering.atoms + len(node.ops)
-            sides = [node.left, *node.comparators]
-            for k, op in enumerate(node.ops):
-                below = isinstance(op, (ast.Lt, ast.LtE))
-                small, large = (sides[k], sides[k + 1]) if below else (sides[k + 1], sides[k])
-                if isinstance(op, (ast.Lt, ast.LtE, ast.Gt, ast.GtE)) and has_abs(small) and not has_abs(large):
-                    found.add(first + k)
-        elif isinstance(node, ast.Call) and not node.keywords:
-            name = node.func.attr if isinstance(node.func, ast.Attribute) else getattr(node.func, "id", "")
-            if name in _ALL_ANY:
-                if isinstance(node.func, ast.Attribute) and not node.args:
-                    visit(node.func.value)
-                elif len(node.args) == 1:
-                    argument = node.args[0]
-                    visit(argument.elt if isinstance(argument, (ast.GeneratorExp, ast.ListComp)) else argument)
-
-    visit(test.test)
+    numbering = _Atoms()  # numbers the comparisons as the recorded claim's were numbered
+    numbering.claim(test.test)
+    for first, node in numbering.compared:
+        sides = [node.left, *node.comparators]
+        for k, op in enumerate(node.ops):
+            below = isinstance(op, (ast.Lt, ast.LtE))
+            small, large = (sides[k], sides[k + 1]) if below else (sides[k + 1], sides[k])
+            if isinstance(op, (ast.Lt, ast.LtE, ast.Gt, ast.GtE)) and has_abs(small) and not has_abs(large):
+                found.add(first + k)
     return found
 
 
