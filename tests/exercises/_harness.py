@@ -243,8 +243,8 @@ class RemoteStudent:
 
     def _report(self) -> None:
         """Pass the worker's new integrity notes to the grader's log, as notes of this chapter."""
+        from minippo.grading.integrity import answer_note
         from minippo.grading.plugin import log_integrity
-        from minippo.grading.sandbox import answer_note
 
         for note in self._sandbox.take_notes():
             note = answer_note(note, self._chapter)
@@ -311,8 +311,9 @@ _sandboxes: dict[Path, object] = {}  # one worker per student folder, for all it
 
 
 def _load_isolated(chapter: str, folder: Path, where: str):
+    from minippo.grading.integrity import scan_source
     from minippo.grading.plugin import LOG_VARIABLE, log_integrity
-    from minippo.grading.sandbox import Sandbox, WorkerDied, scan_source
+    from minippo.grading.sandbox import Sandbox, WorkerDied
 
     if folder not in _sandboxes:
         hide = [p for p in os.environ.get(HIDE_VARIABLE, "").split(os.pathsep) if p]
