@@ -35,6 +35,7 @@ import numpy as np
 import pytest
 
 from minippo.gradcheck import central_differences
+from minippo.grading.chapters import VARIANT_FOLDERS
 from minippo.grading.plugin import plain_exception
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -165,9 +166,6 @@ def _import_file(path: Path, name: str):
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
-
-
-VARIANT_FOLDERS = ("wrong", "right")
 
 
 def load_wrong_variant(chapter: str, variant: str, folder: str = "wrong"):
