@@ -20,6 +20,7 @@ import pytest
 
 from minippo.grading import chapters, reports, sandbox
 from minippo.grading.gradescope import autograder_zip, gradescope_results
+from minippo.grading.integrity import scan_source
 from minippo.grading.supervisor import Result, run_tests
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -460,10 +461,10 @@ def test_a_worker_that_cannot_start_is_the_grader_s_error_not_the_student_s(tmp_
 def test_the_source_scan_names_the_library_s_answer_and_the_reference(tmp_path):
     path = tmp_path / "ch05_clipping.py"
     path.write_text("from minippo import losses\nimport solutions\n\ndef f(x):\n    return losses.clip_fraction(x)\n")
-    notes = sandbox.scan_source(path, "ch05_clipping")
+    notes = scan_source(path, "ch05_clipping")
     assert any("imports solutions" in n for n in notes) and any("minippo.losses.clip_fraction" in n for n in notes)
     # chapter 8's reference uses chapter 6's clip_objective from the library: not chapter 8's answer
-    assert sandbox.scan_source(ROOT / "solutions" / "ch08_shared_network.py", "ch08_shared_network") == []
+    assert scan_source(ROOT / "solutions" / "ch08_shared_network.py", "ch08_shared_network") == []
 
 
 # Gradescope
