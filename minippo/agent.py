@@ -163,11 +163,10 @@ def save_policy(path, agent: ActorCritic, obs_normalizer, extra: dict | None = N
         "normalize_observations": obs_normalizer.enabled,
         "obs_clip": obs_normalizer.clip,
     }
+    stats = {f"obs_{key}": value for key, value in obs_normalizer.state_dict().items()}  # obs_mean, obs_var, obs_count
     write_atomically(
         path,
-        lambda handle: np.savez(
-            handle, params=agent.params, meta=np.array(json.dumps(meta)), **obs_normalizer.stats.state("obs")
-        ),
+        lambda handle: np.savez(handle, params=agent.params, meta=np.array(json.dumps(meta)), **stats),
     )
 
 
@@ -191,8 +190,7 @@ def load_policy(path):
             raise ValueError("weights of the wrong size")
         agent.params[...] = stored["params"]
         normalizer = ObservationNormalizer((meta["obs_dim"],), meta["obs_clip"], meta["normalize_observations"])
-        normalizer.stats.load(stored, "obs")
-        normalizer.refresh()
+        normalizer.load_state_dict({key: stored[f"obs_{key}"] for key in ("mean", "var", "count")})
     except FileNotFoundError:
         raise MinippoError(f"no policy at {path}")
     except (OSError, ValueError, KeyError, zipfile.BadZipFile, json.JSONDecodeError, EOFError) as error:

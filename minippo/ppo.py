@@ -14,10 +14,10 @@ it does.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import os
 import time
-from pathlib import Path
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -216,6 +216,42 @@ class Trainer:
             config = dataclasses.replace(config, clip_epsilon=linear_schedule(config.clip_epsilon, *now))
         return config
 
+    # checkpoints: one dict of everything the next update depends on (nanoGPT's checkpoint, PyTorch's state_dict)
+
+    def state_dict(self) -> dict:
+        """The run between two updates, each part's own ``state_dict`` under its name, so that a Trainer given it by
+        ``load_state_dict`` goes on as this one would have, bitwise."""
+        return {
+            "update": self.update,
+            "wall_s": self.wall_s,
+            "kl_beta": self.kl_beta,
+            "rng": json.dumps(self.rng.bit_generator.state),  # PCG64's 128-bit integers, as text
+            "params": self.agent.params.copy(),
+            "optimizer": self.optimizer.state_dict(),
+            "obs_normalizer": self.obs_normalizer.state_dict(),
+            "reward_scaler": self.reward_scaler.state_dict(),
+            "rollout": self.rollout.state_dict(),
+        }
+
+    def load_state_dict(self, state: dict) -> str | None:
+        """Carry on from ``state`` (a ``state_dict``); returns a one-line notice when the run cannot go on exactly as
+        it would have (its environments could not be saved)."""
+        self.update = int(state["update"])
+        self.wall_s = float(state["wall_s"])
+        self.kl_beta = float(state["kl_beta"])
+        self.rng.bit_generator.state = json.loads(str(state["rng"]))
+        self.agent.params[...] = state["params"]
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.obs_normalizer.load_state_dict(state["obs_normalizer"])
+        self.reward_scaler.load_state_dict(state["reward_scaler"])
+        if self.rollout.load_state_dict(state["rollout"], self.config.seed + 10_000 * self.update):
+            return None
+        return (
+            f"the checkpoint holds no state of the {self.config.env_id} environments (minippo cannot save them, or "
+            "an older minippo wrote it): they start fresh episodes, so the run goes on differently from one never "
+            "interrupted"
+        )
+
     def statistics(self, config: Config, data: dict, dist, steps: list[dict]) -> dict:
         """The update's row of progress.csv: the last 100 episodes, and the debug variables of the batch."""
         logp = dist.log_prob(data["actions"])
@@ -241,7 +277,7 @@ class Trainer:
 
 
 def train(
-    config: Config,
+    config: Config | Trainer,
     out: str | os.PathLike | None = None,
     resume: bool = False,
     on_update=None,
@@ -250,25 +286,28 @@ def train(
 ) -> list[dict]:
     """Train PPO with ``config``; with ``out``, write config.json, progress.csv, checkpoint.npz and policy.npz there.
 
-    ``resume``: carry on from the checkpoint in ``out``, exactly as the run would have gone on. ``on_update(row)`` is
-    called after every update (the command line draws its progress bar with it), ``on_checkpoint(out)`` after every
-    checkpoint. ``stop``: an object whose ``is_set()`` turns true to end the run early (Ctrl-C); the update under way
-    is finished and checkpointed first. Returns the progress rows. On NaN/inf, raises NonFiniteError; when a file
-    cannot be written (a full disk), raises MinippoError; either way the last checkpoint in ``out`` is left as it was.
+    ``config`` may be a ``Trainer`` already made from one (the command line makes it first, so that bad settings stop
+    before the run folder is touched). ``resume``: carry on from the checkpoint in ``out``, exactly as the run would
+    have gone on; without it, an earlier run's files in ``out`` are replaced. ``on_update(row)`` is called after every
+    update (the command line draws its progress bar with it), ``on_checkpoint(out)`` after every checkpoint. ``stop``:
+    an object whose ``is_set()`` turns true to end the run early (Ctrl-C); the update under way is finished and
+    checkpointed first. Returns the progress rows. On NaN/inf, raises NonFiniteError; when a file cannot be written (a
+    full disk), raises MinippoError; either way the last checkpoint in ``out`` is left as it was.
     """
-    from minippo.run_folder import start_folder, write_update
+    from minippo.run_folder import RunFolder
 
-    trainer = Trainer(config)
+    trainer = config if isinstance(config, Trainer) else Trainer(config)
+    config, folder = trainer.config, None if out is None else RunFolder(out)
     try:
-        rows = [] if out is None else start_folder(Path(out), trainer, resume)
+        rows = [] if folder is None else folder.start(trainer, resume)
         while trainer.update < config.num_updates:
             row = trainer.run_update()
             rows.append(row)
             stopping = stop is not None and stop.is_set()  # this update is the last, and it is checkpointed
-            if out is not None:
+            if folder is not None:
                 last = trainer.update == config.num_updates
                 checkpoint = stopping or last or trainer.update % config.checkpoint_every == 0
-                write_update(Path(out), trainer, row, checkpoint)
+                folder.write_update(trainer, row, checkpoint)
                 if checkpoint and on_checkpoint is not None:
                     on_checkpoint(out)
             if on_update is not None:

@@ -182,9 +182,10 @@ def test_cnn_on_flat_observations_is_a_one_line_error(tmp_path, capsys):
     code = main(["train", "CartPole-v1", "--steps", "1024", "--preset", "atari", "--out", str(tmp_path), "--quiet"])
     assert code == 2
     err = capsys.readouterr().err.strip()
-    # the preset set the network, so the message names the preset, not a --config the user never typed
-    assert err == "minippo: error: --preset atari: network=minatar_cnn needs image observations; CartPole-v1 has none"
+    # the field's option and the field, whichever of --preset, --config or the option set it
+    expected = "minippo: error: --network (network): network=minatar_cnn needs image observations; CartPole-v1 has none"
+    assert err == expected
     code = main(["train", "CartPole-v1", "--steps", "1024", "--preset", "atari", "--out", str(tmp_path), "--quiet",
                  "--config", "network=minatar_cnn"])  # fmt: skip
     assert code == 2
-    assert capsys.readouterr().err.startswith("minippo: error: --config network=minatar_cnn needs image observations")
+    assert capsys.readouterr().err.strip() == expected
