@@ -28,7 +28,7 @@ from minippo.agent import ActorCritic
 from minippo.config import OBJECTIVES, Config
 from minippo.envs import image_shape_of, make_env, spaces_of
 from minippo.errors import ConfigError, NonFiniteError
-from minippo.minibatches import minibatches
+from minippo.minibatches import epochs_of
 from minippo.normalization import ObservationNormalizer, RewardScaler
 from minippo.optimizer import Adam, clip_grad_norm, linear_schedule
 from minippo.rollout import Rollout
@@ -188,13 +188,10 @@ class Trainer:
         steps = []  # optimise the surrogate for K epochs with minibatches of M
         order = self.rng if config.shuffle_minibatches else None  # a new random order every epoch, or none
         try:
-            for _ in range(config.epochs):
-                epoch = [
-                    update_minibatch(agent, self.optimizer, minibatch, config, self.kl_beta)
-                    for minibatch in minibatches(data, config.minibatch_size, order)
-                ]
-                steps += epoch
-                if config.target_kl is not None and np.mean([s["approx_kl"] for s in epoch]) > config.target_kl:
+            for epoch in epochs_of(data, config.epochs, config.minibatch_size, order):
+                epoch_steps = [update_minibatch(agent, self.optimizer, mb, config, self.kl_beta) for mb in epoch]
+                steps += epoch_steps
+                if config.target_kl is not None and np.mean([s["approx_kl"] for s in epoch_steps]) > config.target_kl:
                     break  # the policy moved past target_kl in this epoch: stop early
         except NonFiniteError as error:
             raise NonFiniteError(f"{error} at update {self.update}") from None

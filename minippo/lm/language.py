@@ -17,6 +17,7 @@ import numpy as np
 
 from minippo.agent import ActorCritic
 from minippo.distributions import Categorical
+from minippo.minibatches import epochs_of
 from minippo.optimizer import Adam
 
 DETERMINERS = ("the", "a", "my")
@@ -159,11 +160,9 @@ def pretrain(
     policy = model.nets["policy"]
     optimizer = Adam(policy.params, lr=lr)
     history = []
-    for _ in range(epochs):
-        order = rng.permutation(len(targets))
+    for epoch in epochs_of(len(targets), epochs, batch_size, rng):
         losses = []
-        for start in range(0, len(order), batch_size):
-            batch = order[start : start + batch_size]
+        for batch in epoch:
             losses.append(nll_and_grad(model, obs[batch], targets[batch]))
             optimizer.step(policy.grads)
         history.append(float(np.mean(losses)))

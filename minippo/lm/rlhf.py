@@ -39,7 +39,7 @@ from minippo.lm.language import (
     pretrain,
 )
 from minippo.lm.reward_model import RewardModel, make_preferences, rater_score
-from minippo.minibatches import minibatches
+from minippo.minibatches import epochs_of
 from minippo.optimizer import Adam
 from minippo.ppo import Config, update_minibatch
 
@@ -192,8 +192,8 @@ def train_rlhf(pretrained: ActorCritic, reward_model: RewardModel, config: RLHFC
             "advantages": advantages[valid],
             "returns": returns[valid],
         }
-        for _ in range(config.epochs):
-            for minibatch in minibatches(data, config.minibatch_size, rng):
+        for epoch in epochs_of(data, config.epochs, config.minibatch_size, rng):
+            for minibatch in epoch:
                 update_minibatch(agent, optimizer, minibatch, ppo_config)
         logp_after = Categorical(agent.policy_output(data["obs"])).log_prob(data["actions"])
         kl = float(np.mean(np.where(valid, batch["logp"] - batch["logp_ref"], 0.0).sum(axis=1)))
