@@ -18,6 +18,7 @@ import math
 import os
 import time
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -34,7 +35,21 @@ from minippo.optimizer import Adam, clip_grad_norm, linear_schedule
 from minippo.rollout import Rollout
 
 __all__ = ["OBJECTIVES", "Config", "Trainer", "compute_advantages", "flatten", "loss_and_grad", "old_policy", "train"]
-__all__ += ["update_minibatch"]
+__all__ += ["UpdateSettings", "update_minibatch"]
+
+
+class UpdateSettings(Protocol):
+    """What the minibatch update reads of its settings: ``Config`` has these fields, and so has the language models'
+    ``RLHFConfig`` (minippo/lm/rlhf.py), which hands its tokens to the same update."""
+
+    objective: str  # clip, cpi, klpen or pg
+    clip_epsilon: float  # ε of eq. 7 (and of the value clip)
+    value_coef: float  # c1 of eq. 9
+    entropy_coef: float  # c2 of eq. 9
+    normalize_advantages: bool
+    clip_value_loss: bool
+    grad_norm_clipping: bool
+    max_grad_norm: float
 
 
 def compute_advantages(batch, config: Config):
@@ -54,7 +69,7 @@ def compute_advantages(batch, config: Config):
     return returns - batch.values, returns
 
 
-def loss_and_grad(agent: ActorCritic, mb: dict, config: Config, kl_beta: float = 1.0):
+def loss_and_grad(agent: ActorCritic, mb: dict, config: UpdateSettings, kl_beta: float = 1.0):
     """The loss we minimise on one minibatch, −(L^surrogate − c1 L^VF + c2 S) (eq. 9), with its gradient written
     into ``agent.grads``. Returns (loss, statistics)."""
     out, values, cache = agent.forward(mb["obs"])
@@ -103,7 +118,9 @@ def old_policy(agent: ActorCritic, data: dict):
     return agent.distribution(data["policy_out"], data["policy_log_std"])
 
 
-def update_minibatch(agent: ActorCritic, optimizer: Adam, mb: dict, config: Config, kl_beta: float = 1.0) -> dict:
+def update_minibatch(
+    agent: ActorCritic, optimizer: Adam, mb: dict, config: UpdateSettings, kl_beta: float = 1.0
+) -> dict:
     """One Adam step on one minibatch, after the global gradient-norm clip."""
     loss, stats = loss_and_grad(agent, mb, config, kl_beta)
     if config.grad_norm_clipping:
