@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from minippo.agent import save_policy
+from minippo.agent_files import save_policy
 from minippo.records import write_atomically
 
 

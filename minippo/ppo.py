@@ -25,7 +25,7 @@ from threadpoolctl import threadpool_limits
 
 from minippo import advantages as adv
 from minippo import losses
-from minippo.agent import ActorCritic
+from minippo.agent import ActorCritic, AgentSpec
 from minippo.config import OBJECTIVES, Config
 from minippo.envs import image_shape_of, make_env, spaces_of
 from minippo.errors import ConfigError, NonFiniteError
@@ -35,7 +35,7 @@ from minippo.optimizer import Adam, clip_grad_norm, linear_schedule
 from minippo.rollout import Rollout
 
 __all__ = ["OBJECTIVES", "Config", "Trainer", "compute_advantages", "flatten", "loss_and_grad", "old_policy", "train"]
-__all__ += ["UpdateSettings", "update_minibatch"]
+__all__ += ["UpdateSettings", "spec_from", "update_minibatch"]
 
 
 class UpdateSettings(Protocol):
@@ -149,6 +149,19 @@ def flatten(batch, advantages, returns, dtype) -> dict:
     return {key: v.astype(dtype, copy=False) if v.dtype.kind == "f" else v for key, v in data.items()}
 
 
+def spec_from(config: Config, env) -> AgentSpec:
+    """The agent ``config`` asks for, on ``env``'s observations and actions."""
+    obs_dim, kind, act_dim = spaces_of(env)
+    image_shape = image_shape_of(env)
+    if config.network != "mlp" and image_shape is None:
+        raise ConfigError("network", f"network={config.network} needs image observations; {config.env_id} has none")
+    return AgentSpec(
+        obs_dim, kind, act_dim, hidden_sizes=config.hidden_sizes, shared=config.shared_network, network=config.network,
+        image_shape=image_shape, dtype=config.dtype, log_std_init=config.log_std_init,
+        orthogonal_init=config.orthogonal_init,
+    )  # fmt: skip
+
+
 class Trainer:
     """Everything a run needs between two updates: the environments, the agent, Adam, the normalisers, the rng."""
 
@@ -156,25 +169,10 @@ class Trainer:
         self.config = config.validate()
         self.rng = np.random.default_rng(config.seed)
         self.envs = [make_env(config.env_id) for _ in range(config.num_envs)]
-        obs_dim, kind, act_dim = spaces_of(self.envs[0])
-        image_shape = image_shape_of(self.envs[0])
-        if config.network != "mlp" and image_shape is None:
-            raise ConfigError("network", f"network={config.network} needs image observations; {config.env_id} has none")
-        self.agent = ActorCritic(
-            obs_dim,
-            kind,
-            act_dim,
-            hidden_sizes=config.hidden_sizes,
-            shared=config.shared_network,
-            log_std_init=config.log_std_init,
-            orthogonal_init=config.orthogonal_init,
-            rng=self.rng,
-            dtype=config.dtype,
-            network=config.network,
-            image_shape=image_shape,
-        )
+        spec = spec_from(config, self.envs[0])
+        self.agent = ActorCritic(spec, self.rng)
         self.optimizer = Adam(self.agent.params, lr=config.lr, eps=config.adam_eps)
-        self.obs_normalizer = ObservationNormalizer((obs_dim,), config.obs_clip, config.normalize_observations)
+        self.obs_normalizer = ObservationNormalizer((spec.obs_dim,), config.obs_clip, config.normalize_observations)
         self.reward_scaler = RewardScaler(config.gamma, config.reward_clip, config.scale_rewards, config.num_envs)
         self.rollout = Rollout(
             self.envs,

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from minippo.agent import ActorCritic
+from minippo.agent import ActorCritic, AgentSpec
 from minippo.distributions import Categorical
 from minippo.minibatches import epochs_of
 from minippo.optimizer import Adam
@@ -128,7 +128,7 @@ def sequence_features(tokens: np.ndarray) -> np.ndarray:
 
 def new_language_model(rng: np.random.Generator, hidden: int = 64) -> ActorCritic:
     """An untrained policy over the vocabulary (one tanh layer of ``hidden`` units), with its value network."""
-    return ActorCritic(OBS_DIM, "discrete", V, (hidden,), rng=rng, dtype="float64")
+    return ActorCritic(AgentSpec(OBS_DIM, "discrete", V, (hidden,), dtype="float64"), rng)
 
 
 def nll_and_grad(model: ActorCritic, obs: np.ndarray, targets: np.ndarray) -> float:
