@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from minippo.agent import load_policy
+from minippo.agent_files import load_policy
 from minippo.envs import make_env
 from minippo.errors import MinippoError
 from minippo.run_folder import RunFolder

@@ -15,7 +15,7 @@ import sys
 from contextlib import contextmanager
 from pathlib import Path
 
-from minippo.agent import save_policy
+from minippo.agent_files import save_policy
 from minippo.checkpoint import checkpoint_update, load_checkpoint, save_checkpoint
 from minippo.config import Config
 from minippo.errors import MinippoError

@@ -119,11 +119,9 @@ def test_the_core_imports_nothing_of_the_grader_the_language_models_or_the_toys(
 # The core's imports from outside the core as the code stands, each one named: the only exceptions. The test fails on
 # any import not listed here, and on a listed one that is gone (strike it from the list then).
 KNOWN_EXCEPTIONS = {
-    # ActorCritic.save writes policy.npz with records.write_atomically
-    ("agent", "records"),
     # the Trainer makes its environments and reads their spaces (envs.make_env, spaces_of, image_shape_of)
     ("ppo", "envs"),
-    # train() keeps the run folder (run_folder.start_folder, write_update)
+    # train() keeps the run folder (run_folder.RunFolder)
     ("ppo", "run_folder"),
     # the rollout's state, which the checkpoint saves, holds the environments' own (envs.env_state, load_env_state)
     ("rollout", "envs"),
