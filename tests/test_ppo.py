@@ -140,13 +140,14 @@ def test_a_policy_file_of_an_older_minippo_still_loads(tmp_path, rng):
     norm = ObservationNormalizer((4,))
     old_meta = {"obs_dim": 4, "kind": "discrete", "act_dim": 2, "hidden_sizes": [8], "shared": False}
     old_meta |= {"env_id": "CartPole-v1", "normalize_observations": True, "obs_clip": 10.0}
+    stats = {f"obs_{key}": value for key, value in norm.state_dict().items()}  # obs_mean, obs_var, obs_count, as ever
     path = tmp_path / "policy.npz"
-    np.savez(path, params=agent.params, meta=np.array(json.dumps(old_meta)), **norm.stats.state("obs"))
+    np.savez(path, params=agent.params, meta=np.array(json.dumps(old_meta)), **stats)
     loaded, _, _ = load_policy(path)
     assert loaded.spec == AgentSpec(4, "discrete", 2, hidden_sizes=(8,), dtype="float64")
     assert np.array_equal(loaded.params, agent.params)
     del old_meta["act_dim"]
-    np.savez(path, params=agent.params, meta=np.array(json.dumps(old_meta)), **norm.stats.state("obs"))
+    np.savez(path, params=agent.params, meta=np.array(json.dumps(old_meta)), **stats)
     with pytest.raises(MinippoError, match="no entry 'act_dim'"):
         load_policy(path)
 
