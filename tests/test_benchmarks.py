@@ -300,6 +300,7 @@ def test_speed_ratios_use_medians():
     assert skipped["sb3"]["steps_per_s"] == "" and skipped["minippo"]["vs_sb3"] == ""
 
 
+@pytest.mark.slow  # two training runs, one from a checkout
 def test_same_math_finds_no_difference_between_a_commit_and_itself(tmp_path):
     """The real script, end to end: HEAD in a worktree against the working tree, two CartPole updates. The same code
     on the same machine gives the same numbers, so every difference is exactly zero."""

@@ -140,6 +140,7 @@ def test_a_cheat_scores_no_more_than_the_stubs_or_is_flagged(graded, cheat):
     assert int(row["passed"]) <= STUB_SCORE or row["integrity"], row
 
 
+@pytest.mark.slow  # grades a class of 14 in subprocesses (about 90 s)
 @pytest.mark.timeout(900)
 def test_the_cheats_that_reach_for_the_answers_are_flagged(graded):
     rows, _ = graded
@@ -148,6 +149,7 @@ def test_the_cheats_that_reach_for_the_answers_are_flagged(graded):
     assert "minippo.losses.clip_fraction" in rows["library"]["integrity"], rows["library"]
 
 
+@pytest.mark.slow  # grades a class of 14 in subprocesses (about 90 s)
 @pytest.mark.timeout(900)
 def test_honest_work_keeps_its_full_score_and_a_clean_line(graded):
     rows, _ = graded
@@ -158,6 +160,7 @@ def test_honest_work_keeps_its_full_score_and_a_clean_line(graded):
     assert int(rows["library"]["passed"]) > 0, rows["library"]
 
 
+@pytest.mark.slow  # grades a class of 14 in subprocesses (about 90 s)
 @pytest.mark.timeout(900)
 def test_a_formula_in_a_folder_name_stays_text(graded):
     rows, stdout = graded

@@ -180,6 +180,7 @@ def test_pretraining_learns_the_grammar_and_the_reward_model_the_rule(pieces):
     assert record["held_out_accuracy"] > record["blind_held_out_accuracy"]  # reading the subject helps
 
 
+@pytest.mark.slow  # a learning run
 @pytest.mark.timeout(300)
 def test_ppo_on_tokens_raises_the_reward_with_a_bounded_kl_and_hacks_it_without_the_penalty(pieces):
     model, reward_model, _ = pieces
