@@ -7,8 +7,11 @@ from __future__ import annotations
 import numpy as np
 
 from benchmarks import common
-from benchmarks.atlas import FAULTS, RANGES_CSV, RUNS_CSV, SIGNATURES_CSV, TASKS, task_config
+from benchmarks.atlas_faults import FAULTS, RUNS_CSV, TASKS, task_config
 from minippo.records import read_rows
+
+RANGES_CSV = common.RESULTS / "atlas_healthy_ranges.csv"
+SIGNATURES_CSV = common.RESULTS / "atlas_signatures.csv"
 
 VARIABLES = ["return_mean", "length_mean", "approx_kl", "clip_fraction", "entropy", "policy_objective", "value_loss",
              "explained_variance", "lr"]  # fmt: skip

@@ -230,7 +230,7 @@ def make_task(task: str, zero_reward: bool) -> gym.Env:
 
 def run_minippo(entry: Entry, folder: Path) -> tuple[int, int]:
     import minippo.ppo
-    from benchmarks.atlas import replaced
+    from benchmarks.atlas_faults import replaced
 
     def zero_rewards(make_env):
         return lambda *args, **kwargs: ZeroReward(make_env(*args, **kwargs))

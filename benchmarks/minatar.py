@@ -44,18 +44,20 @@ def sweep_runs(algorithms, envs, seeds, steps, overrides=()) -> list:
         preset = Config(env_id=env_id, total_steps=steps, seed=seed, **PRESETS[ALGORITHMS[algorithm]])
         config = preset.with_overrides(overrides).validate()
         labels = {"algorithm": algorithm, "env": env_id, "seed": seed}
-        options = ["--preset", ALGORITHMS[algorithm]] + (["--config", *overrides] if overrides else [])
-        runs.append(Run(run_name(algorithm, env_id, seed, overrides), config, labels, options))
+        runs.append(Run(run_name(algorithm, env_id, seed, overrides), config, labels))
     return runs
 
 
 def write_episodes(run_dir: Path) -> None:
     """episodes.csv (return, length of every finished episode, in order) from the run's final checkpoint."""
-    target = run_dir / "episodes.csv"
-    if target.exists() or not (run_dir / "checkpoint.npz").exists():
+    from minippo.checkpoint import load_checkpoint
+    from minippo.run_folder import RunFolder
+
+    target, checkpoint = run_dir / "episodes.csv", RunFolder(run_dir).checkpoint_npz
+    if target.exists() or not checkpoint.exists():
         return
-    with np.load(run_dir / "checkpoint.npz", allow_pickle=False) as data:
-        returns, lengths = data["returns"], data["lengths"]
+    rollout = load_checkpoint(checkpoint)["rollout"]  # the Trainer's state_dict: the rollout's finished episodes
+    returns, lengths = rollout["returns"], rollout["lengths"]
     episodes = [{"return": f"{value:g}", "length": int(length)} for value, length in zip(returns, lengths)]
     common.write_rows(target, episodes, ["return", "length"])
 

@@ -27,6 +27,7 @@ from pathlib import Path
 from benchmarks import common
 from minippo.ppo import Config
 from minippo.records import append_row, read_rows
+from minippo.run_folder import RunFolder
 from minippo.sweep import Run, Sweep
 
 TASKS = ["Hopper-v5", "HalfCheetah-v5", "Walker2d-v5"]
@@ -77,9 +78,9 @@ def minippo_run(config_dict: dict, name: str = "", board=None, resume: dict | No
 
     result = train_run(config_dict, name, board, resume)
     with threadpool_limits(1), tempfile.TemporaryDirectory(prefix="minippo-eval-") as scratch:
-        policy = Path(scratch) / "policy.npz"
-        policy.write_bytes(result["files"]["policy.npz"])
-        result["eval"] = evaluate(policy, EVAL_EPISODES, EVAL_SEED)
+        folder = RunFolder(scratch)
+        folder.write_files({RunFolder.POLICY: result["files"][RunFolder.POLICY]})
+        result["eval"] = evaluate(folder.policy_npz, EVAL_EPISODES, EVAL_SEED)
     result["version"] = version("minippo")
     return result
 
@@ -152,7 +153,7 @@ def sb3_run(config_dict: dict, name: str = "", board=None) -> dict:
     import ray  # a task of the sweep engine
 
     node = ray.get_runtime_context().get_node_id()[:12] if ray.is_initialized() else ""
-    files = {"config.json": json.dumps(described, indent=2) + "\n", "progress.csv": "\n".join(lines) + "\n"}
+    files = {RunFolder.CONFIG: json.dumps(described, indent=2) + "\n", RunFolder.PROGRESS: "\n".join(lines) + "\n"}
     result = {"files": {key: text.encode() for key, text in files.items()}, "last": rows[-1], "eval": episodes}
     return result | {"version": version("sb3"), "node": node, "host": socket.gethostname(), "pid": os.getpid()}
 
@@ -210,10 +211,8 @@ class PeerSweep(Sweep):
     """The engine with ``peer_run`` as its task, each finished run also recorded in peers.csv (with the evaluation and
     the version, which the engine's sweep.csv lacks)."""
 
-    task = staticmethod(peer_run)
-
     def __init__(self, runs, root, record_csv, **options):
-        super().__init__(runs, root, **options)
+        super().__init__(runs, root, task=peer_run, **options)
         self.record_csv, self.commit = record_csv, code_commit()
 
     def finish(self, run, result, error, attempts) -> dict:
@@ -248,10 +247,11 @@ def evaluate_record(runs_csv, runs_root, record_csv, tasks=TASKS) -> int:
     for run in read_rows(runs_csv):
         if run["env"] not in tasks or (run["env"], run["seed"]) in done:
             continue
-        folder = Path(runs_root) / f"{run['env']}-seed{run['seed']}"
-        if not (folder / "policy.npz").exists():
-            common.fail(f"no policy.npz in {folder}: the final policies stay on the machine that trained them")
-        returns = evaluate(folder, EVAL_EPISODES, EVAL_SEED)
+        folder = RunFolder(Path(runs_root) / f"{run['env']}-seed{run['seed']}")
+        if not folder.policy_npz.exists():
+            where = "the final policies stay on the machine that trained them"
+            common.fail(f"no {folder.POLICY} in {folder.path}: {where}")
+        returns = evaluate(folder.path, EVAL_EPISODES, EVAL_SEED)
         row = {"library": "minippo", "version": version("minippo"), "task": run["env"], **run}
         row["eval_mean"] = round(statistics.fmean(returns), 2)
         append_row(record_csv, FIELDS, row)

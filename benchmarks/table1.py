@@ -15,7 +15,7 @@ import itertools
 from benchmarks import common, scoring
 from minippo.records import append_row, read_rows
 
-# (name, objective, Config overrides): the rows of Table 1, in its order, as ``minippo train`` options
+# (name, objective, Config overrides as --config takes them): the rows of Table 1, in its order
 SETTINGS = [("No clipping or penalty", "cpi", [])]
 SETTINGS += [(f"Clipping, ε = {eps}", "clip", [f"clip_epsilon={eps}"]) for eps in ("0.1", "0.2", "0.3")]
 SETTINGS += [(f"Adaptive KL, d_targ = {d}", "klpen", [f"kl_target={d}"]) for d in ("0.003", "0.01", "0.03")]
@@ -37,12 +37,6 @@ def with_overrides(setting: tuple, overrides: list[str]) -> tuple:
     """A row of SETTINGS with more ``--config`` overrides (KEY=VALUE) for its training."""
     name, objective, own = setting
     return name, objective, [*own, *overrides]
-
-
-def options(setting: tuple) -> list[str]:
-    """A setting as ``minippo train`` options: ['--objective', 'klpen', '--config', 'adaptive_kl=false', ...]."""
-    _, objective, overrides = setting
-    return ["--objective", objective, *(["--config", *overrides] if overrides else [])]
 
 
 def write_table(runs_csv, random_csv, table_csv, tasks, seeds, steps) -> list[dict]:
@@ -96,7 +90,7 @@ def sweep_runs(settings, envs, seeds, steps) -> list:
         name, objective, overrides = setting
         config = Config(env_id=env_id, total_steps=steps, seed=seed, objective=objective).with_overrides(overrides)
         labels = {"setting": name, "env": env_id, "seed": seed}
-        runs.append(Run(f"{slug(name)}-{env_id}-seed{seed}", config.validate(), labels, options(setting)))
+        runs.append(Run(f"{slug(name)}-{env_id}-seed{seed}", config.validate(), labels))
     return runs
 
 

@@ -19,7 +19,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 from threadpoolctl import threadpool_limits  # noqa: E402
 
 from minippo.gradcheck import central_differences  # noqa: E402
-from minippo.minibatches import minibatches  # noqa: E402
+from minippo.minibatches import epochs_of  # noqa: E402
 from minippo.plotting import INK, ORANGE, SAGE  # noqa: E402
 from minippo.ppo import Trainer, compute_advantages, flatten, update_minibatch  # noqa: E402
 from minippo.presets import CARTPOLE_PPO, CARTPOLE_VANILLA  # noqa: E402
@@ -85,8 +85,8 @@ def epochs_on_one_batch(trainer, data, epochs, measure):
     after each pass ``measure(policy)``, with π_θ on the whole batch; returns the list of what it measured."""
     agent, config = trainer.agent, trainer.config
     measured = []
-    for _ in range(epochs):
-        for minibatch in minibatches(data, config.minibatch_size, trainer.rng):
+    for epoch in epochs_of(data, epochs, config.minibatch_size, trainer.rng):
+        for minibatch in epoch:
             update_minibatch(agent, trainer.optimizer, minibatch, config)
         out, _, _ = agent.forward(data["obs"])
         measured.append(measure(agent.distribution(out)))

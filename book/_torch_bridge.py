@@ -23,7 +23,7 @@ import torch
 from torch.distributions import Categorical, Normal, kl_divergence
 
 from minippo import losses
-from minippo.agent import ActorCritic
+from minippo.agent import ActorCritic, AgentSpec
 from minippo.optimizer import Adam
 from minippo.ppo import OBJECTIVES, Config, update_minibatch
 from minippo.ppo import loss_and_grad as minippo_loss_and_grad
@@ -99,7 +99,7 @@ def random_case(kind, shared, objective, seed=0, n=64, obs_dim=5, act_dim=3):
     """A float64 agent (π_θ), a minibatch collected by a nearby π_θold, and a Config that switches every term on."""
     rng = np.random.default_rng(seed)
     config = Config(objective=objective, entropy_coef=0.01, shared_network=shared, hidden_sizes=(16, 16))
-    agent = ActorCritic(obs_dim, kind, act_dim, config.hidden_sizes, shared, 0.0, True, rng, "float64")
+    agent = ActorCritic(AgentSpec(obs_dim, kind, act_dim, config.hidden_sizes, shared, dtype="float64"), rng)
     agent.params += 0.3 * rng.standard_normal(agent.params.size)  # a policy far from uniform
     obs = rng.standard_normal((n, obs_dim))
     policy_out, values, _ = agent.forward(obs)

@@ -1,60 +1,65 @@
 """The actor-critic: the policy π_θ and the value function V, as two MLPs (the paper's MuJoCo setup) or one shared
 trunk with two heads (eq. 9), the trunk a tanh MLP or, for images, a small convolutional network (the paper's Atari
-setup, in MinAtar's size); all parameters in one flat vector. Saving and loading the policy live here too."""
+setup, in MinAtar's size); all parameters in one flat vector. ``AgentSpec`` says what the agent is, and
+``ActorCritic(spec, rng)`` builds it (minippo/agent_files.py saves it and reads it back)."""
 
 from __future__ import annotations
 
-import json
-import zipfile
+from dataclasses import dataclass
 
 import numpy as np
 
+from minippo.config import NETWORKS
 from minippo.conv import ConvTrunk
 from minippo.distributions import Categorical, DiagGaussian
-from minippo.errors import MinippoError
 from minippo.network import MLP
-from minippo.normalization import ObservationNormalizer
-from minippo.records import write_atomically
 
 SQRT2 = float(np.sqrt(2.0))
-NETWORKS = ("mlp", "minatar_cnn")
+
+
+@dataclass(frozen=True)
+class AgentSpec:
+    """What an agent is: everything its constructor needs, and all that a policy file records of it
+    (``dataclasses.asdict(spec)``). ``ppo.spec_from(config, env)`` gives the one a run trains."""
+
+    obs_dim: int  # the observation's size (an image's H·W·C)
+    kind: str  # "discrete" (a categorical over act_dim actions) or "continuous" (a Gaussian of act_dim numbers)
+    act_dim: int
+    hidden_sizes: tuple[int, ...] = (64, 64)  # the tanh layers' widths
+    shared: bool = False  # one trunk read by a policy head and a value head (eq. 9), or two networks
+    network: str = "mlp"  # the trunk: tanh layers of hidden_sizes, or minatar_cnn for images
+    image_shape: tuple[int, int, int] | None = None  # (H, W, C) of image observations
+    dtype: str = "float64"  # float64 for gradient checks; training defaults to float32 (Config.dtype)
+    log_std_init: float = 0.0  # log σ of the Gaussian at the start
+    orthogonal_init: bool = True  # orthogonal weights (gain √2, 0.01, 1), zero biases; else LeCun-uniform
+
+    def __post_init__(self):
+        if self.kind not in ("discrete", "continuous"):
+            raise ValueError(f"kind must be 'discrete' or 'continuous', not {self.kind!r}")
+        if self.network not in NETWORKS:
+            raise ValueError(f"network must be one of {', '.join(NETWORKS)}, not {self.network!r}")
+        if self.network == "minatar_cnn":
+            shape = self.image_shape
+            if shape is None or len(shape) != 3 or np.prod(shape) != self.obs_dim:
+                raise ValueError(f"network 'minatar_cnn' needs images (H, W, C) of {self.obs_dim} numbers")
+            if not self.shared:
+                raise ValueError("network 'minatar_cnn' has one trunk for both heads: shared must be True")
 
 
 class ActorCritic:
-    def __init__(
-        self,
-        obs_dim: int,
-        kind: str,
-        act_dim: int,
-        hidden_sizes=(64, 64),
-        shared: bool = False,
-        log_std_init: float = 0.0,
-        orthogonal_init: bool = True,
-        rng: np.random.Generator | None = None,
-        dtype="float64",
-        network: str = "mlp",
-        image_shape: tuple[int, int, int] | None = None,
-    ):
-        if kind not in ("discrete", "continuous"):
-            raise ValueError(f"kind must be 'discrete' or 'continuous', not {kind!r}")
-        if network not in NETWORKS:
-            raise ValueError(f"network must be one of {', '.join(NETWORKS)}, not {network!r}")
-        self.obs_dim, self.kind, self.act_dim = int(obs_dim), kind, int(act_dim)
-        self.hidden_sizes, self.shared = tuple(int(h) for h in hidden_sizes), bool(shared)
-        self.network = network
-        self.image_shape = None if image_shape is None else tuple(int(s) for s in image_shape)
-        hidden = self.hidden_sizes
+    def __init__(self, spec: AgentSpec, rng: np.random.Generator | None = None):
+        """The agent ``spec`` describes, initialised from ``rng`` (None: all parameters 0, to be filled in)."""
+        self.spec = spec
+        self.obs_dim, self.kind, self.act_dim, self.shared = spec.obs_dim, spec.kind, spec.act_dim, spec.shared
+        obs_dim, act_dim, hidden = spec.obs_dim, spec.act_dim, spec.hidden_sizes
 
         def mlp(sizes, activate):
             return lambda params=None, grads=None: MLP(sizes, activate_output=activate, params=params, grads=grads)
 
-        if network == "minatar_cnn":  # conv(16, 3×3) → ReLU → dense 128 → ReLU, read by both heads (eq. 9)
-            if self.image_shape is None or len(self.image_shape) != 3 or np.prod(self.image_shape) != self.obs_dim:
-                raise ValueError(f"network 'minatar_cnn' needs images (H, W, C) of {obs_dim} numbers")
-            self.shared = True
+        if spec.network == "minatar_cnn":  # conv(16, 3×3) → ReLU → dense 128 → ReLU, read by both heads (eq. 9)
 
             def conv(params=None, grads=None):
-                return ConvTrunk(self.image_shape, params=params, grads=grads)
+                return ConvTrunk(spec.image_shape, params=params, grads=grads)
 
             features = conv().dense_shape[1]
             specs = [  # (name, a maker of the net on given buffers, output gain)
@@ -62,7 +67,7 @@ class ActorCritic:
                 ("policy", mlp((features, act_dim), False), 0.01),
                 ("value", mlp((features, 1), False), 1.0),
             ]
-        elif shared:
+        elif spec.shared:
             specs = [
                 ("trunk", mlp((obs_dim, *hidden), True), SQRT2),  # tanh after the trunk's last layer too
                 ("policy", mlp((hidden[-1], act_dim), False), 0.01),
@@ -74,8 +79,8 @@ class ActorCritic:
                 ("value", mlp((obs_dim, *hidden, 1), False), 1.0),
             ]
         sizes = [make().n_params for _, make, _ in specs]
-        n_log_std = act_dim if kind == "continuous" else 0
-        self.dtype = np.dtype(dtype)  # float64 for gradient checks; training defaults to float32 (Config.dtype)
+        n_log_std = act_dim if spec.kind == "continuous" else 0
+        self.dtype = np.dtype(spec.dtype)
         self.params = np.zeros(sum(sizes) + n_log_std, dtype=self.dtype)
         self.grads = np.zeros_like(self.params)
         offset, self.nets = 0, {}
@@ -87,15 +92,12 @@ class ActorCritic:
         self.grad_log_std = self.grads[offset:]
         if rng is not None:
             for name, _, gain in specs:
-                self.nets[name].init(rng, gain, SQRT2, orthogonal_init)
-            self.log_std[...] = log_std_init
+                self.nets[name].init(rng, gain, SQRT2, spec.orthogonal_init)
+            self.log_std[...] = spec.log_std_init
 
     def copy(self) -> ActorCritic:
         """A twin with its own parameters, equal to these (π_ref and the policy fine-tuned from it start so)."""
-        twin = ActorCritic(
-            self.obs_dim, self.kind, self.act_dim, self.hidden_sizes, shared=self.shared, dtype=self.dtype,
-            network=self.network, image_shape=self.image_shape,
-        )  # fmt: skip
+        twin = ActorCritic(self.spec)
         twin.params[...] = self.params
         return twin
 
@@ -141,69 +143,3 @@ class ActorCritic:
         obs = obs.astype(self.dtype, copy=False)
         features = self.nets["trunk"](obs) if self.shared else obs
         return self.nets["value"](features)[:, 0]
-
-    def meta(self) -> dict:
-        return {
-            "obs_dim": self.obs_dim,
-            "kind": self.kind,
-            "act_dim": self.act_dim,
-            "hidden_sizes": list(self.hidden_sizes),
-            "dtype": self.dtype.name,
-            "shared": self.shared,
-            "network": self.network,
-            "image_shape": None if self.image_shape is None else list(self.image_shape),
-        }
-
-
-def save_policy(path, agent: ActorCritic, obs_normalizer, extra: dict | None = None) -> None:
-    """Write the weights and the observation statistics to ``path`` (.npz), atomically."""
-    meta = {
-        **agent.meta(),
-        **(extra or {}),
-        "normalize_observations": obs_normalizer.enabled,
-        "obs_clip": obs_normalizer.clip,
-    }
-    write_atomically(
-        path,
-        lambda handle: np.savez(
-            handle, params=agent.params, meta=np.array(json.dumps(meta)), **obs_normalizer.stats.state("obs")
-        ),
-    )
-
-
-def load_policy(path):
-    """Return (agent, obs_normalizer, meta) from a policy.npz, or raise a one-line MinippoError."""
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            stored = {key: data[key] for key in data.files}
-        meta = json.loads(str(stored["meta"]))
-        agent = ActorCritic(
-            meta["obs_dim"],
-            meta["kind"],
-            meta["act_dim"],
-            meta["hidden_sizes"],
-            meta["shared"],
-            dtype=meta.get("dtype", "float64"),
-            network=meta.get("network", "mlp"),
-            image_shape=meta.get("image_shape"),
-        )
-        if stored["params"].shape != agent.params.shape:
-            raise ValueError("weights of the wrong size")
-        agent.params[...] = stored["params"]
-        normalizer = ObservationNormalizer((meta["obs_dim"],), meta["obs_clip"], meta["normalize_observations"])
-        normalizer.stats.load(stored, "obs")
-        normalizer.refresh()
-    except FileNotFoundError:
-        raise MinippoError(f"no policy at {path}")
-    except (OSError, ValueError, KeyError, zipfile.BadZipFile, json.JSONDecodeError, EOFError) as error:
-        # NumPy's own message may advise allow_pickle, which would run code from the file: say it in our words
-        reason = {
-            zipfile.BadZipFile: "not an .npz archive",
-            KeyError: f"no entry {error}",
-            json.JSONDecodeError: "its description is not JSON",
-            EOFError: "the file ends early",
-        }.get(type(error), "its weights do not fit" if "wrong size" in str(error) else "not an .npz archive")
-        raise MinippoError(f"cannot read the policy {path}: it is corrupted or not a minippo policy ({reason})")
-    if not np.all(np.isfinite(agent.params)):
-        raise MinippoError(f"the policy {path} holds NaN or infinite weights")
-    return agent, normalizer, meta

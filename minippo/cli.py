@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import functools
 import json
 import os
 import signal
@@ -14,10 +13,10 @@ from pathlib import Path
 
 from minippo.config import Config, field_types
 from minippo.errors import ConfigError, MinippoError, NonFiniteError
+from minippo.flags import add_config_options, flag, train_argv  # noqa: F401 (train_argv: train_config's inverse)
 from minippo.presets import PRESETS
 
 PRESET_NAMES = tuple(PRESETS)
-RUN_FILES = ("config.json", "progress.csv", "policy.npz", "checkpoint.npz", "curve.png")
 
 
 class HelpWithDefaults(argparse.HelpFormatter):
@@ -58,37 +57,6 @@ def steps_notice(config) -> str | None:
     )
 
 
-FLAGS = {"env_id": "ENV", "total_steps": "--steps"}  # the fields whose option is not --field-name
-METAVARS = {int: "N", float: "X", float | None: "X", str: "WORD"}
-
-
-def flag(name: str) -> str:
-    """The option that sets the Config field ``name``: --clip-epsilon for clip_epsilon."""
-    return FLAGS.get(name, "--" + name.replace("_", "-"))
-
-
-def add_config_options(parser, skip=("env_id", "total_steps")) -> None:
-    """An option for every Config field (but ``skip``), made from the field's type, default and meaning; true/false
-    fields get --name and --no-name. Each sets ``args.set_<field>``, None when not given."""
-    group = parser.add_argument_group(
-        "settings", "every field of minippo.Config (minippo/config.py); --config KEY=VALUE sets them too"
-    )
-    kinds = field_types()
-    for field in dataclasses.fields(Config):
-        if field.name in skip:
-            continue
-        kind, words = kinds[field.name], field.metadata["choices"]
-        shown = ",".join(map(str, field.default)) if isinstance(field.default, tuple) else field.default
-        shown = "none: off" if shown is None else str(shown).lower() if kind is bool else shown
-        options = dict(dest=f"set_{field.name}", default=None, help=f"{field.metadata['help']} (default: {shown})")
-        if kind is bool:
-            options["action"] = argparse.BooleanOptionalAction
-        else:
-            options["type"] = functools.partial(Config.parse_value, field.name)
-            options["metavar"] = "|".join(words) if words else METAVARS.get(kind, "N,N")
-        group.add_argument(flag(field.name), **options)
-
-
 def settings_from_args(args) -> dict:
     """{field: value} of the fields a command sets: --preset's, then --config's, then each field's own option."""
     settings = dict(PRESETS[args.preset]) if getattr(args, "preset", None) else {}
@@ -97,65 +65,14 @@ def settings_from_args(args) -> dict:
     return settings | {key: value for key, value in given.items() if value is not None}
 
 
-def keys(texts) -> list[str]:
-    """The fields that --config's KEY=VALUE texts name."""
-    return [text.split("=", 1)[0].strip().replace("-", "_") for text in texts if "=" in text]
-
-
 def config_from_args(args) -> Config:
     """The Config of ``minippo train``: ENV, --steps, then --preset, --config and the fields' own options."""
     return Config(env_id=args.env_id, total_steps=args.steps, **settings_from_args(args))
 
 
-def resumed_config(args, out: Path) -> Config | None:
-    """The Config of the run in ``out`` that --resume continues (with --steps, extended), or None when it has
-    finished already (and said so)."""
-    from minippo.checkpoint import checkpoint_update
-
-    done = checkpoint_update(out)
-    if done is None and (out / "checkpoint.npz").exists():
-        raise MinippoError(f"--resume: cannot read {out / 'checkpoint.npz'}")
-    if done is None:
-        raise MinippoError(f"--resume: no checkpoint in {out}")
-    try:
-        config = Config.from_dict(json.loads((out / "config.json").read_text()))
-    except (FileNotFoundError, json.JSONDecodeError) as error:
-        raise MinippoError(f"--resume: cannot read {out / 'config.json'} ({error})")
-    trained = done * config.batch_size
-    if args.steps is not None and args.steps != config.total_steps:
-        extended = dataclasses.replace(config, total_steps=args.steps).validate()
-        if extended.num_updates < done:
-            raise MinippoError(
-                f"--resume --steps {args.steps:,}: the run has already trained {trained:,} steps ({done} updates)"
-            )
-        if config.anneal_lr and extended.num_updates != config.num_updates:
-            print(
-                f"minippo: the learning rate of updates 1-{done} was annealed over {config.num_updates} updates, "
-                f"not {extended.num_updates}: the extended run differs from one trained to {args.steps:,} steps "
-                "from the start (--no-anneal-lr makes runs that extend exactly)",
-                file=sys.stderr,
-            )
-        config = extended
-    if done >= config.num_updates:
-        print(
-            f"minippo: {out} has finished ({trained:,} steps, {done} updates); to train it further: minippo train "
-            f"{config.env_id} --out {out} --resume --steps N, N > {trained:,}",
-            file=sys.stderr,
-        )
-        return None
-    return config
-
-
-def new_config(args, out: Path) -> Config:
-    """The Config of a new run into ``out`` (emptied of an earlier run's files with --force)."""
-    if out.exists() and any(out.iterdir()):
-        if not args.force:
-            raise MinippoError(f"{out} exists and is not empty; pass --force to overwrite or --resume to continue")
-        for name in RUN_FILES:
-            (out / name).unlink(missing_ok=True)
-    if args.steps is None:
-        raise MinippoError("--steps is required")
-    return config_from_args(args)
+def train_config(argv) -> Config:
+    """The Config that ``minippo train`` with the words ``argv`` trains: ``train_config(train_argv(c, out)) == c``."""
+    return config_from_args(build_parser().parse_args(["train", *argv]))
 
 
 def progress_bar(config: Config):
@@ -174,17 +91,20 @@ def progress_bar(config: Config):
 
 
 def cmd_train(args) -> int:
-    from minippo.checkpoint import checkpoint_update
-    from minippo.ppo import train
+    from minippo.ppo import Trainer, train
+    from minippo.run_folder import RunFolder
 
-    out = Path(args.out)
-    config = resumed_config(args, out) if args.resume else new_config(args, out)
-    if config is None:
-        return 0
-    config.validate()
-    from minippo.envs import make_env
-
-    make_env(config.env_id).close()  # an unknown id or an unsupported space is refused before anything starts
+    folder = RunFolder(args.out)
+    if args.resume:
+        config = folder.resumed_config(args.steps)
+        if config is None:
+            return 0
+    else:
+        folder.check_new(args.force)  # refused unless --force; the old run's files are removed once the Trainer exists
+        if args.steps is None:
+            raise MinippoError("--steps is required")
+        config = config_from_args(args)
+    trainer = Trainer(config)  # bad settings or an unknown environment stop here, before the folder is touched
     notice = steps_notice(config)
     if notice and not args.resume:
         print(f"minippo: {notice}", file=sys.stderr)
@@ -206,14 +126,15 @@ def cmd_train(args) -> int:
 
     in_main_thread = threading.current_thread() is threading.main_thread()  # where Python lets a handler be set
     previous = signal.signal(signal.SIGINT, interrupt) if in_main_thread else None
+    out = folder.path
     continue_with = f"continue with: minippo train {config.env_id} --out {out} --resume"
     try:
-        rows = train(config, out, resume=args.resume, on_update=on_update, stop=stop)
+        rows = train(trainer, out, resume=args.resume, on_update=on_update, stop=stop)
     except NonFiniteError as error:
-        kept = "the last good checkpoint is kept there" if (out / "checkpoint.npz").exists() else "no checkpoint yet"
+        kept = "the last good checkpoint is kept there" if folder.checkpoint_npz.exists() else "no checkpoint yet"
         raise MinippoError(f"stopped: {error}; {kept} ({out})") from None
     except KeyboardInterrupt:
-        kept = checkpoint_update(out)
+        kept = folder.checkpoint_update()
         kept = "no checkpoint yet" if kept is None else f"the checkpoint of update {kept} is kept; {continue_with}"
         print(f"minippo: interrupted at once; {kept}", file=sys.stderr)
         return 130
@@ -228,7 +149,7 @@ def cmd_train(args) -> int:
         return 130
     from minippo.plotting import plot_runs
 
-    plot_runs([out], out / "curve.png", title=f"{config.env_id}, seed {config.seed}")
+    plot_runs([out], folder.curve_png, title=f"{config.env_id}, seed {config.seed}")
     print(
         f"{config.env_id}: {last['step']} steps, return (last 100 episodes) {last['return_mean']:.1f}, "
         f"{last['steps_per_s']:.0f} steps/s, {last['wall_s']:.0f} s -> {out}"
@@ -358,7 +279,8 @@ def build_parser() -> Parser:
                    "network, a2c its A2C baseline; the options below override them")  # fmt: skip
     p.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE",
                    help="set fields of minippo.Config by name, e.g. horizon=512 entropy_coef=0.01")  # fmt: skip
-    p.add_argument("--force", action="store_true", help="overwrite the run files in an existing --out")
+    p.add_argument("--force", action="store_true",
+                   help="replace the run files in an existing --out (once the new settings prove valid)")  # fmt: skip
     p.add_argument("--resume", action="store_true", help="continue from --out's last checkpoint")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     add_config_options(p)
@@ -434,14 +356,18 @@ def build_parser() -> Parser:
     return parser
 
 
-def from_preset(args, field: str) -> str | None:
-    """The --preset that set ``field`` (None when no preset did, or when --config or the field's option set it)."""
-    preset = getattr(args, "preset", None)
-    if not preset or field not in PRESETS[preset]:
-        return None
-    if field in keys(args.config) or getattr(args, f"set_{field}", None) is not None:
-        return None
-    return preset
+def option_message(error: ConfigError) -> str:
+    """A field's error in the command line's words: the option that sets the field, then the field, however it was
+    set (--preset, --config or the option itself): --minibatch-size (minibatch_size): 4096 exceeds the batch …"""
+    message, field = str(error), error.field
+    if not field:
+        return f"--config: {message}"  # a --config word that is not KEY=VALUE
+    if field not in field_types():
+        return message  # an unknown field, which the message names
+    rest = message[len(field) :]
+    if message.startswith(field) and rest[:1] in (" ", ":"):
+        message = rest.lstrip(": ")
+    return f"{flag(field)} ({field}): {message}"
 
 
 def error_exit(message: str, as_json: bool) -> int:
@@ -467,18 +393,8 @@ def main(argv=None) -> int:
         status = args.func(args)
         sys.stdout.flush()  # here, so that a reader gone away (| head) is caught below, not at exit
         return status
-    except ConfigError as error:  # a field's message, in the words of the option that set it
-        message = str(error)
-        preset = from_preset(args, error.field) if args is not None and error.field else None
-        if preset is not None:
-            message = f"--preset {preset}: {message}"
-        elif error.field and message.startswith(error.field):
-            by_config = args is not None and error.field in keys(args.config)
-            by_config = by_config and getattr(args, f"set_{error.field}", None) is None
-            message = (f"--config {error.field}" if by_config else flag(error.field)) + message[len(error.field) :]
-        elif not error.field:
-            message = f"--config: {message}"
-        return error_exit(message, wants_json(argv, args))
+    except ConfigError as error:
+        return error_exit(option_message(error), wants_json(argv, args))
     except MinippoError as error:
         return error_exit(str(error), wants_json(argv, args))
     except BrokenPipeError:  # stdout's reader went away (minippo doctor RUN | head): stop quietly, as a command that

@@ -12,10 +12,10 @@ import functools
 import typing
 from dataclasses import dataclass
 
-from minippo.agent import NETWORKS
 from minippo.errors import ConfigError, MinippoError
 
 OBJECTIVES = ("clip", "cpi", "klpen", "pg")
+NETWORKS = ("mlp", "minatar_cnn")  # the actor-critic's trunks (minippo/agent.py)
 DTYPES = ("float32", "float64")
 TRUE, FALSE = ("true", "1", "yes", "on"), ("false", "0", "no", "off")
 

@@ -58,6 +58,7 @@ from pathlib import Path
 import numpy as np
 
 from minippo.errors import MinippoError
+from minippo.run_folder import RunFolder
 
 # what the doctor reads of an update, beside its number and its step
 FIELDS = ("return_mean", "length_mean", "approx_kl", "clip_fraction", "entropy", "policy_objective", "value_loss",
@@ -331,8 +332,9 @@ def read_log(path) -> Log:
         return _read_events(path) if "tfevents" in path.name else _read_csv(path)
     if not path.is_dir():
         raise MinippoError(f"no run folder or log file {path}")
-    if (path / "progress.csv").is_file():
-        return _read_csv(path / "progress.csv")
+    progress = RunFolder(path).progress_csv  # minippo's, or Stable-Baselines3's of the same name
+    if progress.is_file():
+        return _read_csv(progress)
     folders = sorted({events.parent for events in path.rglob("*tfevents*") if events.is_file()})
     if len(folders) == 1:
         return _read_events(folders[0])

@@ -6,9 +6,10 @@ from pathlib import Path
 
 import numpy as np
 
-from minippo.agent import load_policy
+from minippo.agent_files import load_policy
 from minippo.envs import make_env
 from minippo.errors import MinippoError
+from minippo.run_folder import RunFolder
 
 
 def evaluate(
@@ -17,7 +18,7 @@ def evaluate(
     """Return the list of episode returns of the policy saved in ``run_dir`` (or a policy.npz path)."""
     path = Path(run_dir)
     if path.is_dir():
-        path = path / "policy.npz"
+        path = RunFolder(path).policy_npz
     if episodes < 1:
         raise MinippoError(f"--episodes must be at least 1, not {episodes}")
     agent, normalizer, meta = load_policy(path)

@@ -29,13 +29,13 @@ class RunningMeanStd:
         self.var = m2 / total
         self.count = total
 
-    def state(self, prefix: str) -> dict:
-        return {f"{prefix}_mean": self.mean, f"{prefix}_var": self.var, f"{prefix}_count": np.array(self.count)}
+    def state_dict(self) -> dict:
+        return {"mean": self.mean.copy(), "var": self.var.copy(), "count": np.array(self.count)}
 
-    def load(self, state: dict, prefix: str) -> None:
-        self.mean = np.array(state[f"{prefix}_mean"], dtype=np.float64)
-        self.var = np.array(state[f"{prefix}_var"], dtype=np.float64)
-        self.count = float(state[f"{prefix}_count"])
+    def load_state_dict(self, state: dict) -> None:
+        self.mean = np.array(state["mean"], dtype=np.float64)
+        self.var = np.array(state["var"], dtype=np.float64)
+        self.count = float(state["count"])
 
 
 class ObservationNormalizer:
@@ -64,6 +64,14 @@ class ObservationNormalizer:
         if self.enabled:
             self.stats.update(raw_obs)
             self.refresh()
+
+    def state_dict(self) -> dict:
+        """The running statistics: {"mean", "var", "count"}."""
+        return self.stats.state_dict()
+
+    def load_state_dict(self, state: dict) -> None:
+        self.stats.load_state_dict(state)
+        self.refresh()
 
 
 class RewardScaler:
@@ -98,3 +106,11 @@ class RewardScaler:
             self.discounted[i] = discounted
         self.stats.update(returns)
         return np.clip(rewards / np.sqrt(self.stats.var + 1e-8), -self.clip, self.clip)
+
+    def state_dict(self) -> dict:
+        """The running statistics of G, and each environment's G so far: {"mean", "var", "count", "discounted"}."""
+        return {**self.stats.state_dict(), "discounted": self.discounted.copy()}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.stats.load_state_dict(state)
+        self.discounted = np.array(state["discounted"], dtype=np.float64)

@@ -10,6 +10,7 @@ import numpy as np
 
 from minippo.errors import MinippoError
 from minippo.records import read_rows
+from minippo.run_folder import RunFolder
 
 ORANGE, SAGE, INK = "#c8643b", "#7d9a72", "#2f2a26"  # the course's palette (clay orange, sage, ink)
 PALETTE = [ORANGE, SAGE, "#4f6d8f", "#b59a3c", "#8a5a83", "#5f8f8c", INK]
@@ -17,9 +18,9 @@ PALETTE = [ORANGE, SAGE, "#4f6d8f", "#b59a3c", "#8a5a83", "#5f8f8c", INK]
 
 def read_progress(run_dir) -> dict[str, np.ndarray]:
     """progress.csv as columns of floats."""
-    path = Path(run_dir) / "progress.csv"
+    path = RunFolder(run_dir).progress_csv
     if not path.exists():
-        raise MinippoError(f"no progress.csv in {run_dir}")
+        raise MinippoError(f"no {path.name} in {run_dir}")
     rows = read_rows(path)
     if not rows:
         raise MinippoError(f"{path} has no rows yet")
@@ -50,7 +51,7 @@ def draw_seed_band(ax, grid, values, colour: str, label: str | None = None, alph
 
 def run_label(run_dir) -> str:
     try:
-        config = json.loads((Path(run_dir) / "config.json").read_text())
+        config = json.loads(RunFolder(run_dir).config_json.read_text())
     except (FileNotFoundError, json.JSONDecodeError):
         return Path(run_dir).name
     objective = config.get("objective", "clip")

@@ -14,27 +14,42 @@ it does.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import os
 import time
-from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
 from minippo import advantages as adv
 from minippo import losses
-from minippo.agent import ActorCritic
+from minippo.agent import ActorCritic, AgentSpec
 from minippo.config import OBJECTIVES, Config
 from minippo.envs import image_shape_of, make_env, spaces_of
 from minippo.errors import ConfigError, NonFiniteError
-from minippo.minibatches import minibatches
+from minippo.minibatches import epochs_of
 from minippo.normalization import ObservationNormalizer, RewardScaler
 from minippo.optimizer import Adam, clip_grad_norm, linear_schedule
 from minippo.rollout import Rollout
 
 __all__ = ["OBJECTIVES", "Config", "Trainer", "compute_advantages", "flatten", "loss_and_grad", "old_policy", "train"]
-__all__ += ["update_minibatch"]
+__all__ += ["UpdateSettings", "spec_from", "update_minibatch"]
+
+
+class UpdateSettings(Protocol):
+    """What the minibatch update reads of its settings: ``Config`` has these fields, and so has the language models'
+    ``RLHFConfig`` (minippo/lm/rlhf.py), which hands its tokens to the same update."""
+
+    objective: str  # clip, cpi, klpen or pg
+    clip_epsilon: float  # ε of eq. 7 (and of the value clip)
+    value_coef: float  # c1 of eq. 9
+    entropy_coef: float  # c2 of eq. 9
+    normalize_advantages: bool
+    clip_value_loss: bool
+    grad_norm_clipping: bool
+    max_grad_norm: float
 
 
 def compute_advantages(batch, config: Config):
@@ -54,7 +69,7 @@ def compute_advantages(batch, config: Config):
     return returns - batch.values, returns
 
 
-def loss_and_grad(agent: ActorCritic, mb: dict, config: Config, kl_beta: float = 1.0):
+def loss_and_grad(agent: ActorCritic, mb: dict, config: UpdateSettings, kl_beta: float = 1.0):
     """The loss we minimise on one minibatch, −(L^surrogate − c1 L^VF + c2 S) (eq. 9), with its gradient written
     into ``agent.grads``. Returns (loss, statistics)."""
     out, values, cache = agent.forward(mb["obs"])
@@ -103,7 +118,9 @@ def old_policy(agent: ActorCritic, data: dict):
     return agent.distribution(data["policy_out"], data["policy_log_std"])
 
 
-def update_minibatch(agent: ActorCritic, optimizer: Adam, mb: dict, config: Config, kl_beta: float = 1.0) -> dict:
+def update_minibatch(
+    agent: ActorCritic, optimizer: Adam, mb: dict, config: UpdateSettings, kl_beta: float = 1.0
+) -> dict:
     """One Adam step on one minibatch, after the global gradient-norm clip."""
     loss, stats = loss_and_grad(agent, mb, config, kl_beta)
     if config.grad_norm_clipping:
@@ -132,6 +149,19 @@ def flatten(batch, advantages, returns, dtype) -> dict:
     return {key: v.astype(dtype, copy=False) if v.dtype.kind == "f" else v for key, v in data.items()}
 
 
+def spec_from(config: Config, env) -> AgentSpec:
+    """The agent ``config`` asks for, on ``env``'s observations and actions."""
+    obs_dim, kind, act_dim = spaces_of(env)
+    image_shape = image_shape_of(env)
+    if config.network != "mlp" and image_shape is None:
+        raise ConfigError("network", f"network={config.network} needs image observations; {config.env_id} has none")
+    return AgentSpec(
+        obs_dim, kind, act_dim, hidden_sizes=config.hidden_sizes, shared=config.shared_network, network=config.network,
+        image_shape=image_shape, dtype=config.dtype, log_std_init=config.log_std_init,
+        orthogonal_init=config.orthogonal_init,
+    )  # fmt: skip
+
+
 class Trainer:
     """Everything a run needs between two updates: the environments, the agent, Adam, the normalisers, the rng."""
 
@@ -139,25 +169,10 @@ class Trainer:
         self.config = config.validate()
         self.rng = np.random.default_rng(config.seed)
         self.envs = [make_env(config.env_id) for _ in range(config.num_envs)]
-        obs_dim, kind, act_dim = spaces_of(self.envs[0])
-        image_shape = image_shape_of(self.envs[0])
-        if config.network != "mlp" and image_shape is None:
-            raise ConfigError("network", f"network={config.network} needs image observations; {config.env_id} has none")
-        self.agent = ActorCritic(
-            obs_dim,
-            kind,
-            act_dim,
-            hidden_sizes=config.hidden_sizes,
-            shared=config.shared_network,
-            log_std_init=config.log_std_init,
-            orthogonal_init=config.orthogonal_init,
-            rng=self.rng,
-            dtype=config.dtype,
-            network=config.network,
-            image_shape=image_shape,
-        )
+        spec = spec_from(config, self.envs[0])
+        self.agent = ActorCritic(spec, self.rng)
         self.optimizer = Adam(self.agent.params, lr=config.lr, eps=config.adam_eps)
-        self.obs_normalizer = ObservationNormalizer((obs_dim,), config.obs_clip, config.normalize_observations)
+        self.obs_normalizer = ObservationNormalizer((spec.obs_dim,), config.obs_clip, config.normalize_observations)
         self.reward_scaler = RewardScaler(config.gamma, config.reward_clip, config.scale_rewards, config.num_envs)
         self.rollout = Rollout(
             self.envs,
@@ -188,13 +203,10 @@ class Trainer:
         steps = []  # optimise the surrogate for K epochs with minibatches of M
         order = self.rng if config.shuffle_minibatches else None  # a new random order every epoch, or none
         try:
-            for _ in range(config.epochs):
-                epoch = [
-                    update_minibatch(agent, self.optimizer, minibatch, config, self.kl_beta)
-                    for minibatch in minibatches(data, config.minibatch_size, order)
-                ]
-                steps += epoch
-                if config.target_kl is not None and np.mean([s["approx_kl"] for s in epoch]) > config.target_kl:
+            for epoch in epochs_of(data, config.epochs, config.minibatch_size, order):
+                epoch_steps = [update_minibatch(agent, self.optimizer, mb, config, self.kl_beta) for mb in epoch]
+                steps += epoch_steps
+                if config.target_kl is not None and np.mean([s["approx_kl"] for s in epoch_steps]) > config.target_kl:
                     break  # the policy moved past target_kl in this epoch: stop early
         except NonFiniteError as error:
             raise NonFiniteError(f"{error} at update {self.update}") from None
@@ -215,6 +227,42 @@ class Trainer:
         if config.anneal_clip:
             config = dataclasses.replace(config, clip_epsilon=linear_schedule(config.clip_epsilon, *now))
         return config
+
+    # checkpoints: one dict of everything the next update depends on (nanoGPT's checkpoint, PyTorch's state_dict)
+
+    def state_dict(self) -> dict:
+        """The run between two updates, each part's own ``state_dict`` under its name, so that a Trainer given it by
+        ``load_state_dict`` goes on as this one would have, bitwise."""
+        return {
+            "update": self.update,
+            "wall_s": self.wall_s,
+            "kl_beta": self.kl_beta,
+            "rng": json.dumps(self.rng.bit_generator.state),  # PCG64's 128-bit integers, as text
+            "params": self.agent.params.copy(),
+            "optimizer": self.optimizer.state_dict(),
+            "obs_normalizer": self.obs_normalizer.state_dict(),
+            "reward_scaler": self.reward_scaler.state_dict(),
+            "rollout": self.rollout.state_dict(),
+        }
+
+    def load_state_dict(self, state: dict) -> str | None:
+        """Carry on from ``state`` (a ``state_dict``); returns a one-line notice when the run cannot go on exactly as
+        it would have (its environments could not be saved)."""
+        self.update = int(state["update"])
+        self.wall_s = float(state["wall_s"])
+        self.kl_beta = float(state["kl_beta"])
+        self.rng.bit_generator.state = json.loads(str(state["rng"]))
+        self.agent.params[...] = state["params"]
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.obs_normalizer.load_state_dict(state["obs_normalizer"])
+        self.reward_scaler.load_state_dict(state["reward_scaler"])
+        if self.rollout.load_state_dict(state["rollout"], self.config.seed + 10_000 * self.update):
+            return None
+        return (
+            f"the checkpoint holds no state of the {self.config.env_id} environments (minippo cannot save them, or "
+            "an older minippo wrote it): they start fresh episodes, so the run goes on differently from one never "
+            "interrupted"
+        )
 
     def statistics(self, config: Config, data: dict, dist, steps: list[dict]) -> dict:
         """The update's row of progress.csv: the last 100 episodes, and the debug variables of the batch."""
@@ -241,7 +289,7 @@ class Trainer:
 
 
 def train(
-    config: Config,
+    config: Config | Trainer,
     out: str | os.PathLike | None = None,
     resume: bool = False,
     on_update=None,
@@ -250,25 +298,28 @@ def train(
 ) -> list[dict]:
     """Train PPO with ``config``; with ``out``, write config.json, progress.csv, checkpoint.npz and policy.npz there.
 
-    ``resume``: carry on from the checkpoint in ``out``, exactly as the run would have gone on. ``on_update(row)`` is
-    called after every update (the command line draws its progress bar with it), ``on_checkpoint(out)`` after every
-    checkpoint. ``stop``: an object whose ``is_set()`` turns true to end the run early (Ctrl-C); the update under way
-    is finished and checkpointed first. Returns the progress rows. On NaN/inf, raises NonFiniteError; when a file
-    cannot be written (a full disk), raises MinippoError; either way the last checkpoint in ``out`` is left as it was.
+    ``config`` may be a ``Trainer`` already made from one (the command line makes it first, so that bad settings stop
+    before the run folder is touched). ``resume``: carry on from the checkpoint in ``out``, exactly as the run would
+    have gone on; without it, an earlier run's files in ``out`` are replaced. ``on_update(row)`` is called after every
+    update (the command line draws its progress bar with it), ``on_checkpoint(out)`` after every checkpoint. ``stop``:
+    an object whose ``is_set()`` turns true to end the run early (Ctrl-C); the update under way is finished and
+    checkpointed first. Returns the progress rows. On NaN/inf, raises NonFiniteError; when a file cannot be written (a
+    full disk), raises MinippoError; either way the last checkpoint in ``out`` is left as it was.
     """
-    from minippo.run_folder import start_folder, write_update
+    from minippo.run_folder import RunFolder
 
-    trainer = Trainer(config)
+    trainer = config if isinstance(config, Trainer) else Trainer(config)
+    config, folder = trainer.config, None if out is None else RunFolder(out)
     try:
-        rows = [] if out is None else start_folder(Path(out), trainer, resume)
+        rows = [] if folder is None else folder.start(trainer, resume)
         while trainer.update < config.num_updates:
             row = trainer.run_update()
             rows.append(row)
             stopping = stop is not None and stop.is_set()  # this update is the last, and it is checkpointed
-            if out is not None:
+            if folder is not None:
                 last = trainer.update == config.num_updates
                 checkpoint = stopping or last or trainer.update % config.checkpoint_every == 0
-                write_update(Path(out), trainer, row, checkpoint)
+                folder.write_update(trainer, row, checkpoint)
                 if checkpoint and on_checkpoint is not None:
                     on_checkpoint(out)
             if on_update is not None:

@@ -112,7 +112,7 @@ class Rollout:
 
     # checkpoints: the episodes in progress, so that a resumed run steps on from exactly where it stopped
 
-    def state(self) -> dict:
+    def state_dict(self) -> dict:
         """The counts, the finished episodes, and each environment in the middle of its episode: the observation it
         last returned, the return and length so far, and its own state (``envs.env_state``), left out when one of
         the environments cannot be saved."""
@@ -130,7 +130,7 @@ class Rollout:
                 state.update({f"env{i}.{key}": value for key, value in env.items()})
         return state
 
-    def load_state(self, state: dict, seed: int) -> bool:
+    def load_state_dict(self, state: dict, seed: int) -> bool:
         """Carry on from ``state``. Returns False when it holds no environments (they cannot be saved, or an older
         minippo wrote it): they then start fresh episodes, reset with ``seed + i``."""
         self.steps = int(state["steps"])

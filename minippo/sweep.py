@@ -45,12 +45,14 @@ import tempfile
 import threading
 import typing
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from minippo.config import Config, field_types
 from minippo.errors import MinippoError
+from minippo.flags import train_argv
 from minippo.records import append_row, check_columns, commit_of_code, read_rows
+from minippo.run_folder import RunFolder
 
 RESULT_FIELDS = [
     "steps",
@@ -66,27 +68,23 @@ RESULT_FIELDS = [
     "command",
 ]
 LOOPBACK = ("127.0.0.1", "localhost", "::1")
-RESUMABLE = ("config.json", "progress.csv", "checkpoint.npz", "policy.npz")  # what a run carries on from
 
 
 @dataclass
 class Run:
-    """One training of a sweep: its folder name, its Config, the CSV columns that name it (``labels``) and the
-    ``minippo train`` options that make the same training alone (``options``, after ENV --steps --seed --out)."""
+    """One training of a sweep: its folder name, its Config and the CSV columns that name it (``labels``)."""
 
     name: str
     config: Config
     labels: dict
-    options: list = field(default_factory=list)
 
     def key(self) -> tuple:
         return tuple(str(value) for value in self.labels.values())
 
     def command(self, out_dir) -> str:
-        c = self.config
-        argv = ["minippo", "train", c.env_id, "--steps", str(c.total_steps), "--seed", str(c.seed)]
-        argv += ["--out", str(Path(out_dir) / self.name), "--quiet", *self.options]
-        return " ".join(shlex.quote(part) for part in argv)
+        """The ``minippo train`` command that makes the same training alone, into ``out_dir``/``name``."""
+        argv = ["minippo", "train", *train_argv(self.config, Path(out_dir) / self.name), "--quiet"]
+        return shlex.join(argv)
 
 
 # planning a sweep from the command line's words
@@ -146,28 +144,19 @@ def plan(envs, seeds, steps, grid=(), settings=None) -> list[Run]:
     for env_id in envs:
         for point in itertools.product(*[[(key, value) for value in values] for key, values in grid]):
             fields = {**settings, **dict(point)}
-            options = [word for key, value in fields.items() for word in option(key, value)]
-            shown = {key: text(value, "x") for key, value in point}
+            shown = {key: text(value) for key, value in point}
             for seed in seeds:
                 config = Config(env_id=env_id, total_steps=steps, seed=seed, **fields)
                 config.validate()
                 name = "-".join([env_id, *(f"{key}={value}" for key, value in shown.items()), f"seed{seed}"])
-                runs.append(Run(name, config, {"env": env_id, "seed": seed, **shown}, options))
+                runs.append(Run(name, config, {"env": env_id, "seed": seed, **shown}))
     return runs
 
 
-def option(key: str, value) -> list[str]:
-    """The ``minippo train`` words that set the Config field ``key`` to ``value``: --lr 0.001, --no-anneal-lr."""
-    name = key.replace("_", "-")
-    if isinstance(value, bool):
-        return [f"--{name}" if value else f"--no-{name}"]
-    return [f"--{name}", text(value)]
-
-
-def text(value, between: str = ",") -> str:
-    """A Config value as the command line writes it (a tuple's numbers joined by ``between``)."""
+def text(value) -> str:
+    """A grid value as a run's name and the CSV write it (a tuple's numbers joined by x: 32x32)."""
     if isinstance(value, tuple):
-        return between.join(str(v) for v in value)
+        return "x".join(str(v) for v in value)
     return str(value)
 
 
@@ -181,7 +170,6 @@ def train_run(config_dict: dict, name: str = "", board=None, resume: dict | None
     run carries on as it would have (a retry after its worker died)."""
     from threadpoolctl import threadpool_limits
 
-    from minippo.checkpoint import checkpoint_update
     from minippo.ppo import train
 
     config = Config.from_dict(config_dict)
@@ -193,15 +181,15 @@ def train_run(config_dict: dict, name: str = "", board=None, resume: dict | None
 
     def on_checkpoint(out):
         if board is not None:
-            files = {path.name: path.read_bytes() for path in sorted(Path(out).iterdir()) if path.name in RESUMABLE}
-            board.keep.remote(name, checkpoint_update(out), files)
+            folder = RunFolder(out)
+            board.keep.remote(name, folder.checkpoint_update(), folder.files(RunFolder.RESUMABLE))
 
     with threadpool_limits(1), tempfile.TemporaryDirectory(prefix="minippo-run-") as scratch:
-        for file_name, data in (resume or {}).items():
-            (Path(scratch) / file_name).write_bytes(data)
-        resumed_from = checkpoint_update(scratch) or 0
+        folder = RunFolder(scratch)
+        folder.write_files(resume or {})
+        resumed_from = folder.checkpoint_update() or 0
         rows = train(config, scratch, resume=bool(resume), on_update=on_update, on_checkpoint=on_checkpoint)
-        files = {path.name: path.read_bytes() for path in sorted(Path(scratch).iterdir()) if path.is_file()}
+        files = folder.files()
     node = ""
     if "ray" in sys.modules:
         import ray
@@ -221,18 +209,14 @@ def train_run(config_dict: dict, name: str = "", board=None, resume: dict | None
 # the driver: CSV, run folders, progress
 
 
-def write_run(folder: Path, result: dict, title: str) -> None:
-    """The run's files as the task returned them, then its curve.png as ``minippo train`` draws it."""
+def write_run(path: Path, result: dict, title: str) -> None:
+    """The run's files as the task returned them (an earlier attempt's others removed), then its curve.png as
+    ``minippo train`` draws it."""
     from minippo.plotting import plot_runs
 
-    folder.mkdir(parents=True, exist_ok=True)
-    for name in ("curve.png", "checkpoint.npz"):  # a file of an earlier attempt must not outlive it
-        (folder / name).unlink(missing_ok=True)
-    for name, data in result["files"].items():
-        tmp = folder / f".{name}.part"
-        tmp.write_bytes(data)
-        os.replace(tmp, folder / name)
-    plot_runs([folder], folder / "curve.png", title=title)
+    folder = RunFolder(path)
+    folder.write_files(result["files"])
+    plot_runs([folder.path], folder.curve_png, title=title)
 
 
 def one_line(error: BaseException) -> str:
@@ -248,10 +232,8 @@ class Sweep:
     CSV name ``out`` as it is given (a relative folder stays relative). ``task``: the function each run trains with,
     called as ``train_run`` is and returning the same kind of result."""
 
-    task = staticmethod(train_run)
-
-    def __init__(self, runs, out, csv_path=None, workers=None, address=None, retries=0, quiet=False):
-        self.runs, self.out = list(runs), Path(out)
+    def __init__(self, runs, out, csv_path=None, workers=None, address=None, retries=0, quiet=False, task=train_run):
+        self.runs, self.out, self.task = list(runs), Path(out), task
         self.csv_path = Path(csv_path) if csv_path else self.out / "sweep.csv"
         self.label_fields = list(self.runs[0].labels) if self.runs else ["env", "seed"]
         self.fields = self.label_fields + RESULT_FIELDS

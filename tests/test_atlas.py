@@ -1,6 +1,7 @@
 """The atlas's faults: each injection changes what it says it changes, and nothing is left changed after it."""
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -8,17 +9,20 @@ import pytest
 import minippo.losses
 import minippo.ppo
 from benchmarks import atlas, atlas_signatures
+from benchmarks.atlas_faults import FAULT_TASKS, FAULTS, TASKS, Fault, task_config
 from minippo.distributions import DiagGaussian
 from minippo.ppo import Config, Trainer, compute_advantages
 from minippo.presets import CARTPOLE_PPO
+from minippo.records import read_rows
 from minippo.rollout import Batch
+from minippo.run_folder import PROGRESS_FIELDS
 
 TINY_CARTPOLE = Config(**{**CARTPOLE_PPO, "horizon": 128}, total_steps=128 * 4, seed=1)
 
 
-@pytest.mark.parametrize("mode", [name for name, fault in atlas.FAULTS.items() if fault.patches])
+@pytest.mark.parametrize("mode", [name for name, fault in FAULTS.items() if fault.patches])
 def test_every_patch_is_in_place_inside_the_block_and_restored_after_it(mode):
-    fault = atlas.FAULTS[mode]
+    fault = FAULTS[mode]
     originals = [(owner, name, getattr(owner, name)) for owner, name, _ in fault.patches]
     with fault.injected_into():
         assert all(getattr(owner, name) is not original for owner, name, original in originals)
@@ -27,30 +31,28 @@ def test_every_patch_is_in_place_inside_the_block_and_restored_after_it(mode):
 
 def test_a_patch_is_restored_when_the_block_raises():
     original = minippo.losses.value_loss
-    with pytest.raises(RuntimeError), atlas.FAULTS["value_loss_sign"].injected_into():
+    with pytest.raises(RuntimeError), FAULTS["value_loss_sign"].injected_into():
         raise RuntimeError
     assert minippo.losses.value_loss is original
 
 
-@pytest.mark.parametrize(
-    "mode", [name for name, fault in atlas.FAULTS.items() if name != "healthy" and not fault.patches]
-)
+@pytest.mark.parametrize("mode", [name for name, fault in FAULTS.items() if name != "healthy" and not fault.patches])
 def test_a_config_fault_changes_its_fields_and_leaves_the_task_config_alone(mode):
-    for task in atlas.FAULT_TASKS:
-        if task in atlas.FAULTS[mode].not_applicable:
+    for task in FAULT_TASKS:
+        if task in FAULTS[mode].not_applicable:
             continue
-        base = atlas.task_config(task, 1)
+        base = task_config(task, 1)
         kept = dataclasses.asdict(base)
-        faulty = atlas.FAULTS[mode].configure(base)
+        faulty = FAULTS[mode].configure(base)
         assert dataclasses.asdict(base) == kept
         changed = {k for k, v in dataclasses.asdict(faulty).items() if kept[k] != v}
-        assert changed and changed == set(atlas.FAULTS[mode].changes(base))
+        assert changed and changed == set(FAULTS[mode].changes(base))
 
 
 def test_the_ratio_against_the_current_policy_never_clips_and_logs_no_kl():
     healthy, faulty = Trainer(TINY_CARTPOLE), Trainer(TINY_CARTPOLE)
     healthy_rows = [healthy.run_update() for _ in range(4)]
-    with atlas.FAULTS["ratio_vs_current_policy"].injected_into():
+    with FAULTS["ratio_vs_current_policy"].injected_into():
         faulty_rows = [faulty.run_update() for _ in range(4)]
     assert all(row["clip_fraction"] == 0.0 and row["approx_kl"] == 0.0 for row in faulty_rows)
     assert min(row["approx_kl"] for row in healthy_rows) > 0.0
@@ -60,7 +62,7 @@ def test_the_ratio_against_the_current_policy_never_clips_and_logs_no_kl():
 def test_the_flipped_value_loss_keeps_its_value_and_negates_its_gradient():
     values, targets = np.array([0.0, 1.0, 2.0]), np.array([1.0, 1.0, 0.0])
     loss, grad = minippo.losses.value_loss(values, targets)
-    with atlas.FAULTS["value_loss_sign"].injected_into():
+    with FAULTS["value_loss_sign"].injected_into():
         faulty_loss, faulty_grad = minippo.losses.value_loss(values, targets)
     assert faulty_loss == loss and np.array_equal(faulty_grad, -grad)
 
@@ -72,7 +74,7 @@ def test_the_wrong_axis_gives_every_sample_the_mean_and_its_gradient_matches_fin
     weights = rng.normal(size=n)
     right = DiagGaussian(mean, log_std).log_prob(actions)
     assert (mean * 0).sum(axis=0).shape == (k,)  # the reduction over the samples has one entry per component
-    with atlas.FAULTS["log_prob_wrong_axis"].injected_into():
+    with FAULTS["log_prob_wrong_axis"].injected_into():
         wrong = DiagGaussian(mean, log_std).log_prob(actions)
         grad_mean, grad_log_std = DiagGaussian(mean, log_std).log_prob_backward(actions, weights)
 
@@ -108,9 +110,9 @@ def small_batch():
 def test_the_two_bootstrapping_faults_change_only_their_own_episode_end():
     config = Config(gamma=0.9, gae_lambda=0.0)  # λ = 0: each advantage is its own step's TD residual
     healthy, _ = compute_advantages(small_batch(), config)
-    with atlas.FAULTS["bootstrap_at_termination"].injected_into():
+    with FAULTS["bootstrap_at_termination"].injected_into():
         at_termination, _ = minippo.ppo.compute_advantages(small_batch(), config)
-    with atlas.FAULTS["no_bootstrap_at_truncation"].injected_into():
+    with FAULTS["no_bootstrap_at_truncation"].injected_into():
         at_truncation, _ = minippo.ppo.compute_advantages(small_batch(), config)
     assert healthy[1, 0] == pytest.approx(1 - 5) and at_termination[1, 0] == pytest.approx(1 + 0.9 * 7 - 5)
     assert healthy[3, 0] == pytest.approx(1 + 0.9 * 7 - 5) and at_truncation[3, 0] == pytest.approx(1 - 5)
@@ -121,7 +123,7 @@ def test_the_two_bootstrapping_faults_change_only_their_own_episode_end():
 def test_the_stale_critic_is_the_first_rollouts_and_the_policy_stays_live():
     trainer = Trainer(TINY_CARTPOLE)
     first = trainer.agent.copy()
-    with atlas.FAULTS["stale_value_targets"].injected_into():
+    with FAULTS["stale_value_targets"].injected_into():
         trainer.rollout.collect()
         trainer.agent.params += 0.05  # as an update would move both networks
         batch = trainer.rollout.collect()
@@ -133,7 +135,7 @@ def test_the_stale_critic_is_the_first_rollouts_and_the_policy_stays_live():
 
 
 def test_the_plan_leaves_out_what_does_not_apply():
-    runs = atlas.planned_runs(list(atlas.FAULTS), list(atlas.TASKS), atlas.SEEDS)
+    runs = atlas.planned_runs(list(FAULTS), list(TASKS), atlas.SEEDS)
     assert ("healthy", "MinAtar/Breakout-v1", 1) in runs
     assert not any(mode == "log_prob_wrong_axis" and task == "CartPole-v1" for mode, task, _ in runs)
     assert not any(mode != "healthy" and task.startswith("MinAtar") for mode, task, _ in runs)
@@ -150,8 +152,32 @@ def test_the_signature_rule_finds_the_variable_that_moved():
         row["return_mean"] = np.linspace(10.0, 100.0, n)
         return row
 
-    runs = {("healthy", task, seed): run(0.01) for task in atlas.TASKS for seed in atlas.SEEDS}
+    runs = {("healthy", task, seed): run(0.01) for task in TASKS for seed in atlas.SEEDS}
     runs |= {("lr_10x", "Hopper-v5", seed): run(1.0) for seed in atlas.SEEDS}
     (rule,) = atlas_signatures.signature_rules(runs)
     assert rule["rule"].split()[0].startswith("kl_") and rule["rule"].split()[1] == ">"
     assert rule["seeds_holding"] == "3/3" and rule["healthy_false_alarms"] == "0/9" and rule["verdict"] == "separated"
+
+
+def value_loss_nan(original):
+    def value_loss(*args, **kwargs):
+        _, grad = original(*args, **kwargs)
+        return float("nan"), grad
+
+    return value_loss
+
+
+def test_a_fault_that_stops_the_run_at_its_first_update_is_recorded_with_no_rows(tmp_path, monkeypatch):
+    fault = Fault("value_loss_nan", "losses.value_loss returns NaN", "a non-finite loss", "a finite loss",
+                  patches=((minippo.losses, "value_loss", value_loss_nan),))  # fmt: skip
+    monkeypatch.setitem(FAULTS, fault.name, fault)
+    monkeypatch.setattr(atlas, "RUNS_CSV", tmp_path / "atlas_runs.csv")
+    monkeypatch.setattr(atlas, "RUNS_JSON", tmp_path / "atlas_runs.json")
+    monkeypatch.setattr(atlas, "RUN_FOLDERS", tmp_path / "runs")
+    argv = ["run", "--modes", fault.name, "--tasks", "CartPole-v1", "--seeds", "1"]
+    assert atlas.record_runs([fault.name], ["CartPole-v1"], [1], argv) == 0
+    (run,) = json.loads((tmp_path / "atlas_runs.json").read_text())["runs"]
+    assert run["updates"] == 0 and run["outcome"] == "stopped: non-finite loss or gradient at update 1", run
+    header = (tmp_path / "atlas_runs.csv").read_text().splitlines()
+    assert header == [",".join(["mode", "task", "seed", *PROGRESS_FIELDS])]  # the columns, and no row
+    assert read_rows(tmp_path / "atlas_runs.csv") == []

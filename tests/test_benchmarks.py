@@ -4,11 +4,13 @@ same-math script's two CartPole updates: the sweep engine's Ray tasks are replac
 finished training leaves behind."""
 
 import csv
+import shlex
 
 import numpy as np
 import pytest
 
 from benchmarks import common, report, scoring, seven_tasks, speed, table1
+from minippo.cli import train_config
 from minippo.records import append_row, read_rows
 
 
@@ -216,7 +218,7 @@ def test_ablations_record_each_detail_off_with_the_last_ten_updates(tmp_path, st
     assert list(rows[0]) == ablations.FIELDS and [row["ablation"] for row in rows] == ["default", "use_gae"]
     assert (rows[0]["override"], rows[1]["override"]) == ("(none)", "use_gae=false")
     assert rows[1]["return_last10"] == "15.0" and rows[1]["return_mean"] == "20.0"  # the stub's updates: 10, 20
-    assert rows[1]["command"].endswith(f"--out {tmp_path}/runs/use_gae-seed3 --quiet --config use_gae=false")
+    assert rows[1]["command"].endswith(f"--out {tmp_path}/runs/use_gae-seed3 --no-use-gae --quiet")
     assert stub_engine[1].config.use_gae is False and stub_engine[0].config.use_gae is True
     assert ablations.main(["--only", "default", "--seeds", "3", "--steps", "4096", "--quiet"]) == 0
     assert len(stub_engine) == 2  # recorded: not run again
@@ -245,7 +247,8 @@ def test_runs_an_interrupted_runner_finished_are_recorded_once(tmp_path):
 def test_table1_sweep_makes_the_commands_of_its_records():
     """The runs the sweep describes are the trainings whose commands the 1M-step Table 1 records hold (the KL rows
     among the stale ones being rerun), which the earlier runner started with one BLAS thread set in the environment,
-    which minippo sets itself."""
+    which minippo sets itself, and with the setting's words (--objective, --config), where the sweep now writes every
+    changed field's own option: the same Config, into the same folder."""
     recorded = {
         (row["setting"], row["env"], row["seed"]): row["command"]
         for path in (common.RESULTS / "table1_1m_runs.csv", common.RESULTS / "stale" / "table1_1m_runs.csv")
@@ -258,8 +261,10 @@ def test_table1_sweep_makes_the_commands_of_its_records():
         "seed": 1,
     }
     for run in runs:
-        command = recorded[tuple(str(v) for v in run.labels.values())]
-        assert command.split("minippo ", 1)[1] == run.command("benchmarks/runs/table1_1m").split("minippo ", 1)[1]
+        recorded_words = shlex.split(recorded[tuple(str(v) for v in run.labels.values())].split("minippo train ")[1])
+        words = shlex.split(run.command("benchmarks/runs/table1_1m"))[2:]
+        assert train_config(recorded_words) == train_config(words) == run.config
+        assert recorded_words[recorded_words.index("--out") + 1] == words[words.index("--out") + 1]
     fixed = next(run for run in runs if run.labels["setting"] == "Fixed KL, β = 3")
     assert (fixed.config.objective, fixed.config.adaptive_kl, fixed.config.kl_beta) == ("klpen", False, 3.0)
 
@@ -267,11 +272,11 @@ def test_table1_sweep_makes_the_commands_of_its_records():
 def test_table1_overrides_join_each_settings_config():
     cpi, clip = table1.SETTINGS[0], table1.SETTINGS[2]
     extra = ["grad_norm_clipping=false", "anneal_lr=false"]
-    assert table1.options(table1.with_overrides(cpi, extra)) == ["--objective", "cpi", "--config", *extra]
-    assert table1.options(cpi) == ["--objective", "cpi"]
-    joined = table1.options(table1.with_overrides(clip, extra))
-    assert joined == ["--objective", "clip", "--config", "clip_epsilon=0.2", *extra]
+    assert table1.with_overrides(cpi, extra) == ("No clipping or penalty", "cpi", extra)
+    assert table1.with_overrides(clip, extra) == ("Clipping, ε = 0.2", "clip", ["clip_epsilon=0.2", *extra])
     assert table1.with_overrides(clip, []) == clip
+    (run,) = table1.sweep_runs([table1.with_overrides(cpi, extra)], ["Hopper-v5"], [1], 4096)
+    assert run.command("runs").endswith("--objective cpi --no-anneal-lr --no-grad-norm-clipping --quiet")
 
 
 def test_table1_rejects_a_setting_outside_the_table(capsys):
@@ -295,6 +300,7 @@ def test_speed_ratios_use_medians():
     assert skipped["sb3"]["steps_per_s"] == "" and skipped["minippo"]["vs_sb3"] == ""
 
 
+@pytest.mark.slow  # two training runs, one from a checkout
 def test_same_math_finds_no_difference_between_a_commit_and_itself(tmp_path):
     """The real script, end to end: HEAD in a worktree against the working tree, two CartPole updates. The same code
     on the same machine gives the same numbers, so every difference is exactly zero."""
@@ -440,7 +446,7 @@ def test_minatar_sweep_runs_each_game_with_both_presets():
     ppo, a2c = runs[0].config, runs[1].config
     assert (ppo.objective, ppo.num_envs, ppo.horizon, ppo.epochs, ppo.anneal_clip) == ("clip", 8, 128, 3, True)
     assert (a2c.objective, a2c.epochs, a2c.minibatch_size) == ("pg", 1, a2c.num_envs * a2c.horizon)
-    assert runs[0].command("runs").endswith("--quiet --preset atari") and "Breakout-v1" in runs[0].name
+    assert "Breakout-v1" in runs[0].name and "--network minatar_cnn" in runs[0].command("runs")
 
 
 def test_minatar_ablation_changes_one_setting_over_the_preset_and_names_it():
@@ -450,17 +456,20 @@ def test_minatar_ablation_changes_one_setting_over_the_preset_and_names_it():
     (run,) = runs
     assert run.config.lr == 2.5e-4 and (run.config.objective, run.config.horizon) == ("pg", 5)  # the rest is A2C's
     assert run.name == "a2c-MinAtar-Breakout-v1-lr=0.00025-seed3"
-    assert run.command("runs").endswith("--quiet --preset a2c --config lr=0.00025")
+    words = shlex.split(run.command("runs"))[2:]  # every field A2C and the ablation change, by its own option
+    assert train_config(words) == run.config and words[words.index("--lr") + 1] == "0.00025"
     assert minatar.sweep_runs(["A2C"], ["MinAtar/Breakout-v1"], [3], 20_480)[0].name == "a2c-MinAtar-Breakout-v1-seed3"
 
 
 def test_minatar_table_scores_both_ways_and_counts_wins(tmp_path):
     from benchmarks import minatar
+    from minippo.checkpoint import save_checkpoint
 
     def fake(algorithm, seed, returns):
         folder = tmp_path / "runs" / minatar.run_name(algorithm, "MinAtar/Breakout-v1", seed)
         folder.mkdir(parents=True)
-        np.savez(folder / "checkpoint.npz", returns=np.array(returns, float), lengths=np.ones(len(returns), int))
+        episodes = {"returns": np.array(returns, float), "lengths": np.ones(len(returns), int)}
+        save_checkpoint(folder / "checkpoint.npz", {"update": 1, "rollout": episodes})  # a Trainer's, in part
         minatar.write_episodes(folder)
         return {"algorithm": algorithm, "env": "MinAtar/Breakout-v1", "seed": seed}
 

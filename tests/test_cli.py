@@ -1,13 +1,17 @@
 """The command line as a user meets it: real subprocesses, exit codes, one-line errors, files on disk."""
 
+import dataclasses
 import subprocess
 import sys
+import typing
 
 import gymnasium as gym
 import numpy as np
 import pytest
 
-from minippo.cli import main
+from minippo.cli import main, train_argv, train_config
+from minippo.config import Config, field_types
+from minippo.flags import option
 
 
 def run(*args, timeout=300):
@@ -245,3 +249,59 @@ def test_eval_renders_a_gif_offscreen(tmp_path):
 
     with Image.open(tmp_path / "agent.gif") as gif:
         assert gif.n_frames >= 1 and gif.size == (320, 320)
+
+
+# train_argv, the parser's inverse
+
+
+def away_from_default(field) -> object:
+    """A value of the Config field other than its default, of the field's type (a float with a long repr)."""
+    kind, default, words = field_types()[field.name], field.default, field.metadata["choices"]
+    if words:
+        return next(word for word in words if word != default)
+    if kind is bool:
+        return not default
+    if kind is int:
+        return default + 3
+    if kind is float:
+        return default + 0.1 if default else 0.1 + 0.2  # 0.30000000000000004: written as it reads back
+    if kind == float | None:
+        return 0.015
+    if typing.get_origin(kind) is tuple:
+        return (32, 16, 8)
+    assert kind is str and field.name == "env_id", field.name
+    return "Acrobot-v1"
+
+
+FIELDS = [field.name for field in dataclasses.fields(Config)]
+
+
+@pytest.mark.parametrize("name", FIELDS)
+def test_train_argv_is_the_parser_s_inverse_for_every_field(name):
+    field = next(field for field in dataclasses.fields(Config) if field.name == name)
+    config = Config(**{name: away_from_default(field)})
+    argv = train_argv(config, "runs/x")
+    assert train_config(argv) == config, argv
+    assert argv[argv.index("--out") + 1] == "runs/x"
+    if name not in ("env_id", "total_steps", "seed"):  # written always, first: what names the run
+        assert argv[7:] == option(name, getattr(config, name))  # and only the field that changed
+
+
+def test_train_argv_of_a_config_that_changes_every_field_reads_back():
+    changed = Config(**{field.name: away_from_default(field) for field in dataclasses.fields(Config)})
+    argv = train_argv(changed, "out")
+    assert train_config(argv) == changed
+    assert train_config(train_argv(Config(), "out")) == Config()
+    assert train_argv(Config(), "out") == ["Hopper-v5", "--steps", "1000000", "--seed", "1", "--out", "out"]
+
+
+def test_an_error_names_the_option_and_the_field_however_it_was_set(tmp_path, capsys):
+    base = ["train", "CartPole-v1", "--steps", "1024", "--out", str(tmp_path / "x"), "--quiet"]
+    expected = "minippo: error: --minibatch-size (minibatch_size): 4096 exceeds the batch N·T = 1024\n"
+    for words in (["--minibatch-size", "4096"], ["--config", "minibatch_size=4096"]):
+        assert main([*base, "--horizon", "1024", *words]) == 2
+        assert capsys.readouterr().err == expected
+    assert main([*base, "--epochs", "many"]) == 2
+    assert capsys.readouterr().err == "minippo: error: --epochs (epochs): cannot read 'many' as int\n"
+    assert main([*base, "--config", "epochs"]) == 2
+    assert capsys.readouterr().err == "minippo: error: --config: 'epochs' is not key=value\n"

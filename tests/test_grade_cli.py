@@ -11,17 +11,21 @@ from pathlib import Path
 
 import pytest
 
+from minippo.errors import MinippoError
 from minippo.grading import chapters, reports
 from minippo.grading.supervisor import Result
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def run_grade(*args, impl=None, timeout=300):
+def run_grade(*args, impl=None, timeout=300, course=None):
     env = dict(os.environ)
     env.pop("MINIPPO_IMPL", None)
+    env.pop(chapters.COURSE_VARIABLE, None)
     if impl is not None:
         env["MINIPPO_IMPL"] = str(impl)
+    if course is not None:
+        env[chapters.COURSE_VARIABLE] = str(course)
     return subprocess.run(
         [sys.executable, "-m", "minippo", "grade", *args],
         cwd=ROOT,
@@ -76,6 +80,29 @@ def test_every_chapter_title_is_accepted_as_printed():
         assert chapters.resolve_chapter(title[5:]) == number, title
         assert chapters.resolve_chapter(title) == number, title
     assert chapters.chapter_title(10) == "ch10 everything together"
+
+
+def test_the_course_is_where_minippo_is_installed_from_unless_its_root_is_given(tmp_path, monkeypatch):
+    monkeypatch.delenv(chapters.COURSE_VARIABLE, raising=False)
+    assert chapters.course().root == ROOT
+    (tmp_path / "tests" / "exercises").mkdir(parents=True)
+    (tmp_path / "tests" / "exercises" / "test_ch03_returns.py").write_text("")
+    (tmp_path / "book").mkdir()
+    (tmp_path / "book" / "03-counting-returns.md").write_text("")
+    assert chapters.course(tmp_path).root == tmp_path.resolve()
+    monkeypatch.setenv(chapters.COURSE_VARIABLE, str(tmp_path))
+    assert chapters.course().root == tmp_path.resolve()
+    assert chapters.chapter_files() == {3: tmp_path.resolve() / "tests" / "exercises" / "test_ch03_returns.py"}
+    assert chapters.chapter_title(3) == "ch03 counting returns" and chapters.resolve_chapter("counting-returns") == 3
+
+
+def test_a_course_folder_without_grading_tests_gets_one_line_and_exit_code_2(tmp_path):
+    with pytest.raises(MinippoError, match="is not a course"):
+        chapters.course(tmp_path)
+    result = run_grade("5", course=tmp_path)
+    assert result.returncode == 2 and result.stdout == "", result.stdout + result.stderr
+    assert result.stderr.startswith("minippo: error: ") and f"{tmp_path.resolve()} is not a course" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
 
 
 @pytest.mark.timeout(120)

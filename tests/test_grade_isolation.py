@@ -20,6 +20,7 @@ import pytest
 
 from minippo.grading import chapters, reports, sandbox
 from minippo.grading.gradescope import autograder_zip, gradescope_results
+from minippo.grading.integrity import scan_source
 from minippo.grading.supervisor import Result, run_tests
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -139,6 +140,7 @@ def test_a_cheat_scores_no_more_than_the_stubs_or_is_flagged(graded, cheat):
     assert int(row["passed"]) <= STUB_SCORE or row["integrity"], row
 
 
+@pytest.mark.slow  # grades a class of 14 in subprocesses (about 90 s)
 @pytest.mark.timeout(900)
 def test_the_cheats_that_reach_for_the_answers_are_flagged(graded):
     rows, _ = graded
@@ -147,6 +149,7 @@ def test_the_cheats_that_reach_for_the_answers_are_flagged(graded):
     assert "minippo.losses.clip_fraction" in rows["library"]["integrity"], rows["library"]
 
 
+@pytest.mark.slow  # grades a class of 14 in subprocesses (about 90 s)
 @pytest.mark.timeout(900)
 def test_honest_work_keeps_its_full_score_and_a_clean_line(graded):
     rows, _ = graded
@@ -157,6 +160,7 @@ def test_honest_work_keeps_its_full_score_and_a_clean_line(graded):
     assert int(rows["library"]["passed"]) > 0, rows["library"]
 
 
+@pytest.mark.slow  # grades a class of 14 in subprocesses (about 90 s)
 @pytest.mark.timeout(900)
 def test_a_formula_in_a_folder_name_stays_text(graded):
     rows, stdout = graded
@@ -460,10 +464,10 @@ def test_a_worker_that_cannot_start_is_the_grader_s_error_not_the_student_s(tmp_
 def test_the_source_scan_names_the_library_s_answer_and_the_reference(tmp_path):
     path = tmp_path / "ch05_clipping.py"
     path.write_text("from minippo import losses\nimport solutions\n\ndef f(x):\n    return losses.clip_fraction(x)\n")
-    notes = sandbox.scan_source(path, "ch05_clipping")
+    notes = scan_source(path, "ch05_clipping")
     assert any("imports solutions" in n for n in notes) and any("minippo.losses.clip_fraction" in n for n in notes)
     # chapter 8's reference uses chapter 6's clip_objective from the library: not chapter 8's answer
-    assert sandbox.scan_source(ROOT / "solutions" / "ch08_shared_network.py", "ch08_shared_network") == []
+    assert scan_source(ROOT / "solutions" / "ch08_shared_network.py", "ch08_shared_network") == []
 
 
 # Gradescope

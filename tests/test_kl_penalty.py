@@ -11,7 +11,7 @@ import pytest
 from conftest import assert_close, numerical_gradient
 
 from minippo import Config, losses
-from minippo.agent import ActorCritic
+from minippo.agent import ActorCritic, AgentSpec
 from minippo.distributions import Categorical, DiagGaussian
 from minippo.ppo import Trainer, loss_and_grad, old_policy
 
@@ -41,7 +41,7 @@ def gaussian_minibatch(agent, rng, n=16):
 
 
 def test_the_penalty_sees_a_change_of_sigma_alone(rng):
-    agent = ActorCritic(3, "continuous", 2, hidden_sizes=(8,), log_std_init=-0.5, rng=rng)
+    agent = ActorCritic(AgentSpec(3, "continuous", 2, hidden_sizes=(8,), log_std_init=-0.5), rng)
     mb = gaussian_minibatch(agent, rng)
     agent.log_std[...] += np.array([0.25, -0.1])  # θ moved only in log σ: the means are unchanged
     config = Config(objective="klpen", entropy_coef=0.0, value_coef=0.0)
@@ -62,7 +62,7 @@ def test_the_penalty_sees_a_change_of_sigma_alone(rng):
 
 
 def test_penalty_gradient_in_log_sigma_holds_the_old_policy_fixed(rng):
-    agent = ActorCritic(3, "continuous", 2, hidden_sizes=(8,), log_std_init=-0.5, rng=rng)
+    agent = ActorCritic(AgentSpec(3, "continuous", 2, hidden_sizes=(8,), log_std_init=-0.5), rng)
     agent.params[...] += 0.2 * rng.standard_normal(agent.params.shape)
     mb = gaussian_minibatch(agent, rng)
     agent.log_std[...] += np.array([0.3, -0.2])
@@ -113,7 +113,7 @@ def test_one_klpen_update_hands_the_beta_rule_the_papers_kl(env_id, monkeypatch)
 def test_a_policy_built_before_an_update_stays_the_old_policy(rng):
     """π_θ taken from the agent before some Adam steps is π_θold afterwards: its σ must not follow the agent's log σ,
     which the optimiser moves in place (the same trap as a batch without its own log σ)."""
-    agent = ActorCritic(3, "continuous", 2, hidden_sizes=(8,), log_std_init=-0.5, rng=rng)
+    agent = ActorCritic(AgentSpec(3, "continuous", 2, hidden_sizes=(8,), log_std_init=-0.5), rng)
     obs = rng.standard_normal((16, 3))
     before = agent.distribution(agent.policy_output(obs))
     log_std_before = agent.log_std.copy()

@@ -8,7 +8,7 @@ import pytest
 from conftest import assert_close, numerical_gradient
 
 from minippo import losses
-from minippo.agent import ActorCritic
+from minippo.agent import ActorCritic, AgentSpec
 from minippo.cli import main
 from minippo.ppo import Config, Trainer, loss_and_grad, train
 from minippo.presets import A2C, ATARI, CARTPOLE_PPO, PRESETS
@@ -21,7 +21,8 @@ GAMES = ["Asterix", "Breakout", "Freeway", "Seaquest", "SpaceInvaders"]
 
 @pytest.mark.parametrize("objective", ["clip", "pg"])
 def test_cnn_whole_loss_gradient_matches_finite_differences(rng, objective):
-    agent = ActorCritic(5 * 5 * 2, "discrete", 3, network="minatar_cnn", image_shape=(5, 5, 2), rng=rng)
+    spec = AgentSpec(5 * 5 * 2, "discrete", 3, shared=True, network="minatar_cnn", image_shape=(5, 5, 2))
+    agent = ActorCritic(spec, rng)
     assert agent.shared and agent.nets["trunk"].dense_shape == (3 * 3 * 16, 128)
     agent.params[...] += 0.1 * rng.standard_normal(agent.params.shape)  # biases and heads off their init
     n = 6
@@ -50,7 +51,7 @@ def test_cnn_whole_loss_gradient_matches_finite_differences(rng, objective):
 
 def test_cnn_needs_images_and_a_shared_trunk():
     with pytest.raises(ValueError, match="needs images"):
-        ActorCritic(4, "discrete", 2, network="minatar_cnn")
+        AgentSpec(4, "discrete", 2, shared=True, network="minatar_cnn")
     with pytest.raises(Exception, match="shared_network"):
         Config(network="minatar_cnn").validate()
     with pytest.raises(Exception, match="network must be one of"):
@@ -182,9 +183,10 @@ def test_cnn_on_flat_observations_is_a_one_line_error(tmp_path, capsys):
     code = main(["train", "CartPole-v1", "--steps", "1024", "--preset", "atari", "--out", str(tmp_path), "--quiet"])
     assert code == 2
     err = capsys.readouterr().err.strip()
-    # the preset set the network, so the message names the preset, not a --config the user never typed
-    assert err == "minippo: error: --preset atari: network=minatar_cnn needs image observations; CartPole-v1 has none"
+    # the field's option and the field, whichever of --preset, --config or the option set it
+    expected = "minippo: error: --network (network): network=minatar_cnn needs image observations; CartPole-v1 has none"
+    assert err == expected
     code = main(["train", "CartPole-v1", "--steps", "1024", "--preset", "atari", "--out", str(tmp_path), "--quiet",
                  "--config", "network=minatar_cnn"])  # fmt: skip
     assert code == 2
-    assert capsys.readouterr().err.startswith("minippo: error: --config network=minatar_cnn needs image observations")
+    assert capsys.readouterr().err.strip() == expected

@@ -115,7 +115,7 @@ def test_runs_alternate_libraries_and_name_their_command():
         "sb3-Hopper-v5-seed2",
     ]
     assert runs[1].labels == {"library": "sb3", "task": "Hopper-v5", "seed": 1}
-    assert runs[0].config == Config(env_id="Hopper-v5", seed=1) and peers.PeerSweep.task is peers.peer_run
+    assert runs[0].config == Config(env_id="Hopper-v5", seed=1)
     assert runs[1].command("benchmarks/runs/peers") == (
         "python -m benchmarks.peers --libraries sb3 --tasks Hopper-v5 --seeds 1 --steps 1000000"
     )
@@ -253,6 +253,7 @@ def test_a_missing_sb3_is_named_with_its_install_command(monkeypatch, capsys):
 
 def test_the_peer_sweep_logs_and_records_its_own_columns(tmp_path):
     job = peers.PeerSweep(peers.sweep_runs(["Hopper-v5"], [1], 4096), tmp_path / "runs", tmp_path / "peers.csv")
+    assert job.task is peers.peer_run  # given to the engine when the sweep is made
     assert job.fields[:4] == ["library", "task", "seed", "steps"] and job.record_csv == tmp_path / "peers.csv"
     assert job.csv_path == tmp_path / "runs" / "sweep.csv" and job.commit == peers.code_commit()
 

@@ -2,14 +2,16 @@
 
 import csv
 import dataclasses
+import json
 
 import numpy as np
 import pytest
 from conftest import assert_close, numerical_gradient
 
 from minippo import Config, train
-from minippo.agent import ActorCritic, load_policy, save_policy
-from minippo.errors import NonFiniteError
+from minippo.agent import ActorCritic, AgentSpec
+from minippo.agent_files import load_policy, save_policy
+from minippo.errors import MinippoError, NonFiniteError
 from minippo.normalization import ObservationNormalizer, RewardScaler, RunningMeanStd
 from minippo.optimizer import Adam
 from minippo.ppo import loss_and_grad, update_minibatch
@@ -47,7 +49,7 @@ def minibatch(agent, rng, n=9):
 @pytest.mark.parametrize("shared", [False, True])
 @pytest.mark.parametrize("objective", ["clip", "cpi", "klpen", "pg"])
 def test_whole_loss_gradient_matches_finite_differences(rng, kind, shared, objective):
-    agent = ActorCritic(4, kind, 3, hidden_sizes=(8, 8), shared=shared, log_std_init=-0.3, rng=rng)
+    agent = ActorCritic(AgentSpec(4, kind, 3, hidden_sizes=(8, 8), shared=shared, log_std_init=-0.3), rng)
     agent.params[...] += 0.3 * rng.standard_normal(agent.params.shape)  # move the heads off their tiny init
     config = Config(objective=objective, entropy_coef=0.01, value_coef=0.7)
     mb = minibatch(agent, rng)
@@ -62,7 +64,7 @@ def test_whole_loss_gradient_matches_finite_differences(rng, kind, shared, objec
 def test_a_float32_agent_computes_its_gradients_in_float32(rng, kind, objective, monkeypatch):
     """One float64 number in the chain (a NumPy float64 scalar is enough) would turn every matmul of the backward
     pass into float64 and cost a third of the update's time, without changing any result visibly."""
-    agent = ActorCritic(4, kind, 3, hidden_sizes=(8, 8), rng=rng, dtype="float32")
+    agent = ActorCritic(AgentSpec(4, kind, 3, hidden_sizes=(8, 8), dtype="float32"), rng)
     mb = {
         key: value.astype(np.float32) if value.dtype.kind == "f" else value
         for key, value in minibatch(agent, rng).items()
@@ -81,7 +83,7 @@ def test_a_float32_agent_computes_its_gradients_in_float32(rng, kind, objective,
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
 def test_a_nan_gradient_stops_before_the_parameters_change(rng):
-    agent = ActorCritic(4, "continuous", 2, hidden_sizes=(8,), rng=rng)
+    agent = ActorCritic(AgentSpec(4, "continuous", 2, hidden_sizes=(8,)), rng)
     mb = minibatch(agent, rng)
     mb["advantages"][0] = np.inf
     before = agent.params.copy()
@@ -121,14 +123,51 @@ def test_normalizers_clip_and_scale(rng):
 
 
 def test_policy_round_trip(tmp_path, rng):
-    agent = ActorCritic(5, "continuous", 2, rng=rng)
+    agent = ActorCritic(AgentSpec(5, "continuous", 2, hidden_sizes=(16, 8), shared=True, log_std_init=-0.5), rng)
     norm = ObservationNormalizer((5,))
     norm.update(rng.normal(size=(100, 5)))
     save_policy(tmp_path / "policy.npz", agent, norm, {"env_id": "Hopper-v5"})
     loaded, loaded_norm, meta = load_policy(tmp_path / "policy.npz")
     obs = rng.normal(size=(3, 5))
     assert np.array_equal(loaded.policy_output(loaded_norm(obs)), agent.policy_output(norm(obs)))
-    assert meta["env_id"] == "Hopper-v5"
+    assert loaded.spec == agent.spec and meta["env_id"] == "Hopper-v5"
+    assert meta["hidden_sizes"] == [16, 8] and meta["log_std_init"] == -0.5  # the spec's fields, as JSON has them
+
+
+def test_a_policy_file_of_an_older_minippo_still_loads(tmp_path, rng):
+    """Files written before the agent had a spec describe it with eight keys, dtype and network among them optional."""
+    agent = ActorCritic(AgentSpec(4, "discrete", 2, hidden_sizes=(8,)), rng)
+    norm = ObservationNormalizer((4,))
+    old_meta = {"obs_dim": 4, "kind": "discrete", "act_dim": 2, "hidden_sizes": [8], "shared": False}
+    old_meta |= {"env_id": "CartPole-v1", "normalize_observations": True, "obs_clip": 10.0}
+    stats = {f"obs_{key}": value for key, value in norm.state_dict().items()}  # obs_mean, obs_var, obs_count, as ever
+    path = tmp_path / "policy.npz"
+    np.savez(path, params=agent.params, meta=np.array(json.dumps(old_meta)), **stats)
+    loaded, _, _ = load_policy(path)
+    assert loaded.spec == AgentSpec(4, "discrete", 2, hidden_sizes=(8,), dtype="float64")
+    assert np.array_equal(loaded.params, agent.params)
+    del old_meta["act_dim"]
+    np.savez(path, params=agent.params, meta=np.array(json.dumps(old_meta)), **stats)
+    with pytest.raises(MinippoError, match="no entry 'act_dim'"):
+        load_policy(path)
+
+
+def test_an_agent_spec_refuses_what_no_network_can_be():
+    with pytest.raises(ValueError, match="kind must be"):
+        AgentSpec(4, "multibinary", 2)
+    with pytest.raises(ValueError, match="shared must be True"):
+        AgentSpec(50, "discrete", 3, network="minatar_cnn", image_shape=(5, 5, 2))
+    spec = AgentSpec(4, "discrete", 2)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        spec.act_dim = 3
+
+
+def test_a_copy_is_the_same_agent_with_its_own_parameters(rng):
+    agent = ActorCritic(AgentSpec(3, "continuous", 2, hidden_sizes=(8,), log_std_init=-1.0), rng)
+    twin = agent.copy()
+    assert twin.spec == agent.spec and np.array_equal(twin.params, agent.params)
+    twin.params += 1.0
+    assert not np.array_equal(twin.params, agent.params)
 
 
 def read_rows(path):

@@ -304,7 +304,7 @@ def kill_at_the_gate(gate: Path, killed: list) -> None:
 
 
 @pytest.mark.timeout(300)
-def test_a_sweep_retries_a_killed_worker_s_run_from_its_checkpoint(ray_environment, tmp_path, monkeypatch):
+def test_a_sweep_retries_a_killed_worker_s_run_from_its_checkpoint(ray_environment, tmp_path):
     import ray.cloudpickle
 
     from minippo import sweep
@@ -316,21 +316,18 @@ def test_a_sweep_retries_a_killed_worker_s_run_from_its_checkpoint(ray_environme
         return train_until_killed(config_dict, name, board, resume, str(gate))
 
     resumed_from = []
-    finish = sweep.Sweep.finish
 
-    def finish_and_note(self, run, result, error, attempts):
-        resumed_from.append(None if result is None else result["resumed_from"])
-        finish(self, run, result, error, attempts)
+    class Noted(sweep.Sweep):
+        def finish(self, run, result, error, attempts):
+            resumed_from.append(None if result is None else result["resumed_from"])
+            return super().finish(run, result, error, attempts)
 
-    monkeypatch.setattr(sweep.Sweep, "finish", finish_and_note)
-    monkeypatch.setattr(sweep.Sweep, "task", staticmethod(task))
     out = tmp_path / "sweep"
     killed: list = []
     killer = threading.Thread(target=kill_at_the_gate, args=(gate, killed), daemon=True)
     killer.start()
-    words = ["sweep", "CartPole-v1", "--seeds", "2", "--steps", "4096", "--out", str(out), "--workers", "1"]
-    words += ["--retries", "1", "--quiet", "--config", "horizon=256", "epochs=4", "checkpoint_every=1"]
-    assert main(words) == 0
+    runs = sweep.plan(["CartPole-v1"], [2], 4096, settings={"horizon": 256, "epochs": 4, "checkpoint_every": 1})
+    assert Noted(runs, out, workers=1, retries=1, quiet=True, task=task).run() == 0
     killer.join(timeout=5)
     assert len(killed) == 1, "the worker did not reach the gate"
     with open(out / "sweep.csv", newline="") as handle:

@@ -1,10 +1,15 @@
 """The language model in miniature: its grammar, the gradients of its pretraining and of the Bradley–Terry reward
 model (central differences in float64), the KL-shaped rewards, and PPO on tokens learning with a bounded KL."""
 
+import dataclasses
+import typing
+
 import numpy as np
 import pytest
 from conftest import assert_close, numerical_gradient
 
+from minippo.config import Config
+from minippo.distributions import Categorical
 from minippo.lm import language as lm
 from minippo.lm.reward_model import TASTES, RewardModel, bradley_terry_loss, make_preferences, rater_score
 from minippo.lm.rlhf import (
@@ -16,6 +21,9 @@ from minippo.lm.rlhf import (
     token_advantages,
     train_rlhf,
 )
+from minippo.minibatches import epochs_of
+from minippo.optimizer import Adam
+from minippo.ppo import UpdateSettings, update_minibatch
 
 
 def test_the_grammar_writes_well_formed_sentences_and_the_checker_rejects_others(rng):
@@ -172,6 +180,7 @@ def test_pretraining_learns_the_grammar_and_the_reward_model_the_rule(pieces):
     assert record["held_out_accuracy"] > record["blind_held_out_accuracy"]  # reading the subject helps
 
 
+@pytest.mark.slow  # a learning run
 @pytest.mark.timeout(300)
 def test_ppo_on_tokens_raises_the_reward_with_a_bounded_kl_and_hacks_it_without_the_penalty(pieces):
     model, reward_model, _ = pieces
@@ -254,3 +263,27 @@ def test_proportional_beta_moves_by_at_most_the_clipped_error():
     assert proportional_beta(1.0, 2.0, 2.0) == 1.0
     assert np.isclose(proportional_beta(1.0, 100.0, 2.0), 1.02) and np.isclose(proportional_beta(1.0, 0.0, 2.0), 0.98)
     assert np.isclose(proportional_beta(0.5, 2.2, 2.0), 0.5 * (1 + 0.1 * 0.1))
+
+
+def test_the_minibatch_update_reads_an_rlhf_config_as_it_reads_the_ppo_config_of_the_same_settings(rng):
+    """RLHFConfig has every field the update reads (ppo.UpdateSettings), so no PPO Config is made for tokens; and the
+    update it drives is the one a Config of the same settings drives, step for step."""
+    settings = typing.get_type_hints(UpdateSettings)
+    assert settings and set(settings) <= {f.name for f in dataclasses.fields(RLHFConfig)}
+    assert set(settings) <= {f.name for f in dataclasses.fields(Config)}
+    config = RLHFConfig(objective="clip", clip_epsilon=0.1, value_coef=0.7, max_grad_norm=0.3)
+    same = Config(**{name: getattr(config, name) for name in settings})
+    model = lm.new_language_model(rng, hidden=8)
+    obs = rng.random((40, lm.OBS_DIM))
+    out, values, _ = model.forward(obs)
+    actions = rng.integers(0, lm.V, 40)
+    data = {"obs": obs, "actions": actions, "logp": Categorical(out).log_prob(actions) - 0.3 * rng.random(40)}
+    data |= {"values": values, "advantages": rng.normal(size=40), "returns": values + rng.normal(size=40)}
+    twins = [model.copy(), model.copy()]
+    for agent, settings_used in zip(twins, (config, same)):
+        optimizer = Adam(agent.params, lr=1e-2)
+        for epoch in epochs_of(data, 2, 16, np.random.default_rng(7)):
+            for minibatch in epoch:
+                update_minibatch(agent, optimizer, minibatch, settings_used)
+    assert not np.array_equal(twins[0].params, model.params)
+    assert np.array_equal(twins[0].params, twins[1].params)

@@ -69,9 +69,9 @@ def test_seeds_grid_and_plan():
     assert first.labels == {"env": "CartPole-v1", "seed": 1, "clip_epsilon": "0.1", "hidden_sizes": "32x32"}
     assert first.config.objective == "klpen" and first.config.kl_target == 0.003
     assert first.config.hidden_sizes == (32, 32) and first.config.total_steps == 4096
-    assert first.command("out") == (
+    assert first.command("out") == (  # cli.train_argv's words: the changed fields in Config's order
         "minippo train CartPole-v1 --steps 4096 --seed 1 --out out/CartPole-v1-clip_epsilon=0.1-hidden_sizes=32x32-"
-        "seed1 --quiet --objective klpen --kl-target 0.003 --clip-epsilon 0.1 --hidden-sizes 32,32"
+        "seed1 --objective klpen --clip-epsilon 0.1 --kl-target 0.003 --hidden-sizes 32,32 --quiet"
     )
     assert [run.config.env_id for run in runs[-4:]] == ["Acrobot-v1"] * 4
 

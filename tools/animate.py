@@ -33,7 +33,7 @@ def main(argv=None) -> int:
         print(f"animate.py: error: no policy.npz in {args.run}", file=sys.stderr)
         return 2
     import minippo.evaluate
-    from minippo.agent import load_policy
+    from minippo.agent_files import load_policy
     from minippo.envs import make_env
     from minippo.errors import MinippoError
     from minippo.evaluate import evaluate

@@ -36,7 +36,7 @@ def sweep_runs(names, env_id: str, steps: int, seeds) -> list:
         override = [] if name == "default" else [f"{name}=false"]
         config = Config(env_id=env_id, total_steps=steps, seed=seed).with_overrides(override)
         labels = {"ablation": name, "override": override[0] if override else "(none)", "env": env_id, "seed": seed}
-        runs.append(Run(f"{name}-seed{seed}", config, labels, ["--config", *override] if override else []))
+        runs.append(Run(f"{name}-seed{seed}", config, labels))
     return runs
 
 

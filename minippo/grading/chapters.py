@@ -1,16 +1,25 @@
-"""The chapters ``minippo grade`` grades, and their names.
+"""The course ``minippo grade`` grades: where it is, its chapters and their names.
 
 The chapters are found, not listed: a chapter is graded when tests/exercises/test_chNN_<topic>.py exists, and its
-book name (``minippo grade the-min``) comes from book/NN-<name>.md. A new chapter needs only those two files.
+book name (``minippo grade the-min``) comes from book/NN-<name>.md. A new chapter needs only those two files. The
+course is the repository minippo is installed from (``pip install -e .``), or the folder the environment variable
+MINIPPO_COURSE names.
 """
 
 from __future__ import annotations
 
+import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
 
 from minippo.errors import MinippoError
+
+COURSE_VARIABLE = "MINIPPO_COURSE"
+INSTALLED_FROM = Path(__file__).resolve().parents[2]  # the repository holding this minippo, with ``pip install -e .``
+# the course's own variants of the exercises, each graded by its folder's name (MINIPPO_IMPL=wrong): the deliberately
+# wrong ones the tests must reject and the other right ones they must accept, in tests/exercises/<name>/
+VARIANT_FOLDERS = ("wrong", "right")
 
 
 @dataclass(frozen=True)
@@ -28,12 +37,18 @@ class Course:
         return self.root / "book"
 
 
-def course() -> Course:
-    """The course: the repository minippo is installed from (``pip install -e .``), the one place the grading tests and
-    the book's pages are looked for. Raises MinippoError when it holds no grading tests (minippo from a wheel, say)."""
-    found = Course(Path(__file__).resolve().parents[2])
+def course(root: str | os.PathLike | None = None) -> Course:
+    """The course at ``root``, the one place the grading tests and the book's pages are looked for; by default the
+    folder MINIPPO_COURSE names, else the repository minippo is installed from. Raises MinippoError when it holds no
+    grading tests (minippo from a wheel, say, or a folder that is not a course)."""
+    if root is None:
+        root = os.environ.get(COURSE_VARIABLE, "").strip() or INSTALLED_FROM
+    found = Course(Path(root).expanduser().resolve())
     if not any(found.tests.glob("test_ch[0-9][0-9]_*.py")):
-        raise MinippoError(f"no grading tests found in {found.tests} (grade from the course's repository)")
+        raise MinippoError(
+            f"{found.root} is not a course: no grading tests in {found.tests} (set {COURSE_VARIABLE} to the course's "
+            "repository)"
+        )
     return found
 
 

@@ -12,12 +12,13 @@ scan saw a submission do that an instructor should know of (importing the refere
 the exercise, reaching for the grader's files) goes to the integrity column; how far the worker was isolated, to the
 isolation column. ``--gradescope FILE`` writes the results in Gradescope's results.json format; ``--autograder-zip``
 builds the zip Gradescope runs (minippo.grading.gradescope).
+
+The course (its grading tests and the book's chapter names) is the repository minippo is installed from, or the folder
+the environment variable MINIPPO_COURSE names (minippo.grading.chapters).
 """
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 import os
 import sys
@@ -25,11 +26,11 @@ import time
 from pathlib import Path
 
 from minippo.errors import MinippoError
-from minippo.grading.chapters import chapter_files, chapter_title, chapters_to_grade
+from minippo.grading.chapters import VARIANT_FOLDERS, chapter_files, chapter_title, chapters_to_grade
 from minippo.grading.gradescope import gradescope_results
 from minippo.grading.reports import CSV_FIELDS, chapter_score, csv_cell, failures_in_detail, integrity_notes, scoreboard
 from minippo.grading.supervisor import IMPL_VARIABLE, RUN_LIMIT_S, grader_error, run_tests
-from minippo.records import write_atomically
+from minippo.records import write_atomically, write_rows
 
 NOT_GRADED = "not graded"  # a class's passed cell when the grader could not run the student's code
 
@@ -74,7 +75,7 @@ def grade(
     files = chapter_files()
     if impl is None:
         impl = "solutions" if solutions else os.environ.get(IMPL_VARIABLE, "").strip() or "exercises"
-    if impl not in ("exercises", "solutions", "wrong", "right"):
+    if impl not in ("exercises", "solutions", *VARIANT_FOLDERS):
         if not Path(impl).expanduser().is_dir():
             raise MinippoError(f"no submission folder {impl}")
         impl = str(find_submission(Path(impl).expanduser().resolve()))
@@ -168,11 +169,7 @@ def grade_class(
             name = " ".join(student.name.split())
             print(f"{name:<{width}}  {chapter_title(number):<22}  {fraction:>7}  {shown}", file=out, flush=True)
     if csv_path is not None:
-        table = io.StringIO()
-        writer = csv.DictWriter(table, fieldnames=CSV_FIELDS)
-        writer.writeheader()
-        writer.writerows(rows)
-        write_atomically(Path(csv_path).expanduser(), lambda handle: handle.write(table.getvalue().encode("utf-8")))
+        write_rows(Path(csv_path).expanduser(), CSV_FIELDS, rows)
         print(f"Wrote {len(rows)} rows to {csv_path}.", file=out)
     if not_graded:
         print(f"{len(not_graded)} of {len(students)} students not graded, by the grader's error above.", file=out)

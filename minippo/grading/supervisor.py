@@ -20,7 +20,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from minippo.grading.chapters import chapter_of_nodeid, course
+from minippo.grading.chapters import COURSE_VARIABLE, VARIANT_FOLDERS, chapter_of_nodeid, course
 from minippo.grading.plugin import KEY_VARIABLE, LOG_VARIABLE, STOP_VARIABLE, TIME_FACTOR_VARIABLE, signature
 
 IMPL_VARIABLE = "MINIPPO_IMPL"
@@ -61,6 +61,7 @@ def run_tests(
     test. The whole run, restarts included, stops after ``limit_s`` seconds."""
     root = course().root
     env = dict(os.environ)
+    env[COURSE_VARIABLE] = str(root)  # the tests' worker hides the same course from the student's code
     env[IMPL_VARIABLE] = impl
     if stop_at_first_failure:
         env[STOP_VARIABLE] = "1"
@@ -70,7 +71,7 @@ def run_tests(
     env[KEY_VARIABLE] = key
     if hide:
         env[HIDE_VARIABLE] = os.pathsep.join(str(p) for p in hide)
-    if impl not in ("solutions", "wrong", "right") and not env.get(TIME_FACTOR_VARIABLE):
+    if impl not in ("solutions", *VARIANT_FOLDERS) and not env.get(TIME_FACTOR_VARIABLE):
         env[TIME_FACTOR_VARIABLE] = str(WORKER_TIME_FACTOR)
     integrity = integrity if integrity is not None else {}
     collected, results, note = [], {}, ""

@@ -22,7 +22,7 @@ from minippo.agent import ActorCritic
 from minippo.distributions import Categorical
 from minippo.lm.language import PROMPT_LEN, sequence_features
 from minippo.lm.reward_model import bradley_terry_loss
-from minippo.minibatches import minibatch_indices
+from minippo.minibatches import epochs_of
 from minippo.optimizer import Adam, clip_grad_norm
 
 
@@ -108,9 +108,9 @@ def train_dpo(pretrained: ActorCritic, preferred, rejected, config: DPOConfig, o
     ref_w = sequence_log_probs(reference.nets["policy"], data_w, n)[0]
     ref_l = sequence_log_probs(reference.nets["policy"], data_l, n)[0]
     history = []
-    for epoch in range(1, config.epochs + 1):
+    for number, epoch in enumerate(epochs_of(n, config.epochs, config.minibatch_pairs, rng), start=1):
         epoch_losses = []
-        for pairs in minibatch_indices(n, config.minibatch_pairs, rng):
+        for pairs in epoch:
             take = np.sort(pairs)
             loss = dpo_loss_and_grad(
                 policy, _select(data_w, take), _select(data_l, take), ref_w[take], ref_l[take], config.beta
@@ -119,7 +119,7 @@ def train_dpo(pretrained: ActorCritic, preferred, rejected, config: DPOConfig, o
             optimizer.step(policy.grads)
             epoch_losses.append(loss)
         margin = sequence_log_probs(policy, data_w, n)[0] - ref_w - sequence_log_probs(policy, data_l, n)[0] + ref_l
-        stats = {"epoch": epoch, "loss": float(np.mean(epoch_losses)), "accuracy": float(np.mean(margin > 0))}
+        stats = {"epoch": number, "loss": float(np.mean(epoch_losses)), "accuracy": float(np.mean(margin > 0))}
         history.append(stats)
         if on_epoch is not None:
             on_epoch(stats, agent)

@@ -36,7 +36,7 @@ from minippo.distributions import Categorical
 from minippo.lm.language import PROMPT_LEN, make_prompts
 from minippo.lm.reward_model import RewardModel
 from minippo.lm.rlhf import collect, sequence_stats
-from minippo.minibatches import minibatch_indices
+from minippo.minibatches import epochs_of
 from minippo.optimizer import Adam, clip_grad_norm
 
 KL_ESTIMATORS = ("k3", "k2")  # the KL estimators GRPOConfig.kl_estimator can put in the loss
@@ -108,7 +108,6 @@ def kl_estimate_and_grad(logp, logp_ref, estimator: str = "k3"):
     raise ValueError(f"estimator must be 'k3' or 'k2', not {estimator!r}")
 
 
-
 def grpo_objective(logp, logp_old, logp_ref, advantages, weights, epsilon: float, beta: float, estimator="k3"):
     """J = Σ_t w_t [min(r_t Â_t, clip(r_t, 1−ε, 1+ε) Â_t) − β k_t], with r_t = π_θ/π_θold, k_t the KL estimate
     (k3 by default, or k2) and w_t the weight of token t (1 / (responses × the length of its response), so that each
@@ -165,8 +164,8 @@ def train_grpo(pretrained: ActorCritic, reward_model: RewardModel, config: GRPOC
             returns = returns - config.beta * np.where(inside, batch["logp"] - batch["logp_ref"], 0.0).sum(axis=1)
         grouped = returns.reshape(config.prompts, config.group)
         advantages = group_advantages(grouped, normalize_std=config.normalize_std).reshape(-1)
-        for _ in range(config.epochs):
-            for take in minibatch_indices(len(prompts), config.minibatch_responses, rng):
+        for epoch in epochs_of(len(prompts), config.epochs, config.minibatch_responses, rng):
+            for take in epoch:
                 lengths = batch["lengths"][take]
                 valid = np.arange(batch["logp"].shape[1])[None, :] < lengths[:, None]
                 minibatch = {key: batch[key][take][valid] for key in ("obs", "actions", "logp", "logp_ref")}

@@ -15,8 +15,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from minippo.agent import ActorCritic
+from minippo.agent import ActorCritic, AgentSpec
 from minippo.distributions import Categorical
+from minippo.minibatches import epochs_of
 from minippo.optimizer import Adam
 
 DETERMINERS = ("the", "a", "my")
@@ -127,7 +128,7 @@ def sequence_features(tokens: np.ndarray) -> np.ndarray:
 
 def new_language_model(rng: np.random.Generator, hidden: int = 64) -> ActorCritic:
     """An untrained policy over the vocabulary (one tanh layer of ``hidden`` units), with its value network."""
-    return ActorCritic(OBS_DIM, "discrete", V, (hidden,), rng=rng, dtype="float64")
+    return ActorCritic(AgentSpec(OBS_DIM, "discrete", V, (hidden,), dtype="float64"), rng)
 
 
 def nll_and_grad(model: ActorCritic, obs: np.ndarray, targets: np.ndarray) -> float:
@@ -159,11 +160,9 @@ def pretrain(
     policy = model.nets["policy"]
     optimizer = Adam(policy.params, lr=lr)
     history = []
-    for _ in range(epochs):
-        order = rng.permutation(len(targets))
+    for epoch in epochs_of(len(targets), epochs, batch_size, rng):
         losses = []
-        for start in range(0, len(order), batch_size):
-            batch = order[start : start + batch_size]
+        for batch in epoch:
             losses.append(nll_and_grad(model, obs[batch], targets[batch]))
             optimizer.step(policy.grads)
         history.append(float(np.mean(losses)))

@@ -39,13 +39,16 @@ from minippo.lm.language import (
     pretrain,
 )
 from minippo.lm.reward_model import RewardModel, make_preferences, rater_score
-from minippo.minibatches import minibatches
+from minippo.minibatches import epochs_of
 from minippo.optimizer import Adam
-from minippo.ppo import Config, update_minibatch
+from minippo.ppo import update_minibatch
 
 
 @dataclass
 class RLHFConfig:
+    """The settings of PPO on tokens. minippo's minibatch update reads its own straight from them (ppo.UpdateSettings:
+    the objective, ε, c1, c2 and the last four fields)."""
+
     seed: int = 0
     updates: int = 60  # PPO iterations
     sequences: int = 64  # sequences generated per iteration (the batch)
@@ -64,25 +67,15 @@ class RLHFConfig:
     gamma: float = 1.0  # γ: the score comes at the end, and nothing is discounted inside a sentence
     gae_lambda: float = 0.95  # λ
     value_coef: float = 0.5  # c1
+    entropy_coef: float = 0.0  # c2: no entropy bonus
+    normalize_advantages: bool = True  # Â to mean 0 and std 1 in each minibatch
+    clip_value_loss: bool = False  # V free to move more than ±ε from the rollout's value
+    grad_norm_clipping: bool = True  # the whole gradient scaled down to norm max_grad_norm when larger
     max_grad_norm: float = 0.5
 
     def __post_init__(self):
         if self.kl_rule not in ("eq8", "proportional"):
             raise ValueError(f"kl_rule must be 'eq8' or 'proportional', not {self.kl_rule!r}")
-
-    def ppo_config(self) -> Config:
-        """The fields of minippo's Config that its minibatch update reads."""
-        return Config(
-            objective=self.objective,
-            clip_epsilon=self.clip_epsilon,
-            value_coef=self.value_coef,
-            entropy_coef=0.0,
-            normalize_advantages=True,
-            clip_value_loss=False,
-            grad_norm_clipping=True,
-            max_grad_norm=self.max_grad_norm,
-            dtype="float64",
-        )
 
 
 def kl_shaped_rewards(logp, logp_ref, scores, lengths, beta: float) -> np.ndarray:
@@ -177,7 +170,6 @@ def train_rlhf(pretrained: ActorCritic, reward_model: RewardModel, config: RLHFC
     rng = np.random.default_rng(config.seed)
     agent, reference = pretrained.copy(), pretrained.copy()
     optimizer = Adam(agent.params, lr=config.lr)
-    ppo_config = config.ppo_config()
     beta, history = config.beta, []
     for update in range(1, config.updates + 1):
         prompts = make_prompts(config.sequences, rng, config.prompt_len)
@@ -192,9 +184,9 @@ def train_rlhf(pretrained: ActorCritic, reward_model: RewardModel, config: RLHFC
             "advantages": advantages[valid],
             "returns": returns[valid],
         }
-        for _ in range(config.epochs):
-            for minibatch in minibatches(data, config.minibatch_size, rng):
-                update_minibatch(agent, optimizer, minibatch, ppo_config)
+        for epoch in epochs_of(data, config.epochs, config.minibatch_size, rng):
+            for minibatch in epoch:
+                update_minibatch(agent, optimizer, minibatch, config)
         logp_after = Categorical(agent.policy_output(data["obs"])).log_prob(data["actions"])
         kl = float(np.mean(np.where(valid, batch["logp"] - batch["logp_ref"], 0.0).sum(axis=1)))
         stats = {

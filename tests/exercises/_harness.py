@@ -35,6 +35,7 @@ import numpy as np
 import pytest
 
 from minippo.gradcheck import central_differences
+from minippo.grading.chapters import VARIANT_FOLDERS
 from minippo.grading.plugin import plain_exception
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -167,9 +168,6 @@ def _import_file(path: Path, name: str):
     return module
 
 
-VARIANT_FOLDERS = ("wrong", "right")
-
-
 def load_wrong_variant(chapter: str, variant: str, folder: str = "wrong"):
     """A fresh copy of the reference solution of ``chapter`` with the functions of one variant (from tests/exercises/
     wrong/ or right/) swapped in.
@@ -243,8 +241,8 @@ class RemoteStudent:
 
     def _report(self) -> None:
         """Pass the worker's new integrity notes to the grader's log, as notes of this chapter."""
+        from minippo.grading.integrity import answer_note
         from minippo.grading.plugin import log_integrity
-        from minippo.grading.sandbox import answer_note
 
         for note in self._sandbox.take_notes():
             note = answer_note(note, self._chapter)
@@ -311,8 +309,9 @@ _sandboxes: dict[Path, object] = {}  # one worker per student folder, for all it
 
 
 def _load_isolated(chapter: str, folder: Path, where: str):
+    from minippo.grading.integrity import scan_source
     from minippo.grading.plugin import LOG_VARIABLE, log_integrity
-    from minippo.grading.sandbox import Sandbox, WorkerDied, scan_source
+    from minippo.grading.sandbox import Sandbox, WorkerDied
 
     if folder not in _sandboxes:
         hide = [p for p in os.environ.get(HIDE_VARIABLE, "").split(os.pathsep) if p]

@@ -19,7 +19,7 @@ from _harness import call_checking_inputs, check_array, check_close, check_scala
 from gymnasium.wrappers import TimeLimit
 
 from minippo import losses
-from minippo.agent import ActorCritic
+from minippo.agent import ActorCritic, AgentSpec
 from minippo.distributions import sample_categorical
 from minippo.envs import make_env
 from minippo.normalization import ObservationNormalizer, RewardScaler
@@ -39,7 +39,7 @@ RATIOS = np.array([0.5, 0.75, 0.95, 1.0, 1.05, 1.25, 1.6, 0.85, 1.15, 1.21, 0.81
 
 def make_agent(kind, seed=3):
     act_dim = 3 if kind == "discrete" else 2
-    return ActorCritic(4, kind, act_dim, hidden_sizes=(8, 8), log_std_init=-0.4, rng=np.random.default_rng(seed))
+    return ActorCritic(AgentSpec(4, kind, act_dim, hidden_sizes=(8, 8), log_std_init=-0.4), np.random.default_rng(seed))
 
 
 def make_minibatch(agent, n=16, seed=4):
@@ -635,9 +635,8 @@ class Scene:
     def __init__(self, ends, horizon, kind="discrete", bounds=None, seed=0):
         self.T, self.N, self.bounds = horizon, len(ends), bounds
         act_dim = 2 if kind == "continuous" else 3
-        self.agent = ActorCritic(
-            OBS_DIM, kind, act_dim, (8, 8), log_std_init=0.3, rng=np.random.default_rng(seed), dtype="float64"
-        )
+        spec = AgentSpec(OBS_DIM, kind, act_dim, (8, 8), log_std_init=0.3)
+        self.agent = ActorCritic(spec, np.random.default_rng(seed))
         self.rng, self.replay = np.random.default_rng(seed + 1), np.random.default_rng(seed + 1)
         self.envs = [ScriptedEnv(i, e) for i, e in enumerate(ends)]
         self.twins = [ScriptedEnv(i, e) for i, e in enumerate(ends)]  # the same course, stepped by the tests
@@ -1012,7 +1011,7 @@ def test_collect_matches_minippo_s_rollout_on_cartpole(student):
     # three batches of T = 64 steps in N = 4 CartPole-v1 environments with a time limit of 30 steps, so that the
     # untrained policy's episodes both terminate (the pole falls) and are truncated; the statistics are on
     T, N, seed, batches = 64, 4, 3, 3
-    agent = ActorCritic(4, "discrete", 2, (64, 64), rng=np.random.default_rng(seed), dtype="float64")
+    agent = ActorCritic(AgentSpec(4, "discrete", 2, (64, 64)), np.random.default_rng(seed))
 
     def environments():
         return [TimeLimit(make_env("CartPole-v1"), max_episode_steps=30) for _ in range(N)]

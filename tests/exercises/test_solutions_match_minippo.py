@@ -11,7 +11,7 @@ from test_ch10_ppo_update import SnapshotPolicy
 
 from minippo import advantages as adv
 from minippo import losses
-from minippo.agent import ActorCritic
+from minippo.agent import ActorCritic, AgentSpec
 from minippo.conv import conv2d_backward, conv2d_forward
 from minippo.distributions import Categorical, DiagGaussian
 from minippo.envs import make_env
@@ -203,7 +203,7 @@ def minibatch_for(agent, rng, n):
 def test_ppo_loss_and_update(seed, kind):
     rng = np.random.default_rng(seed)
     config = Config(clip_value_loss=False, entropy_coef=0.01, epochs=3, minibatch_size=7, objective="clip")
-    agent = ActorCritic(4, kind, 2, hidden_sizes=(8, 8), rng=np.random.default_rng(seed))
+    agent = ActorCritic(AgentSpec(4, kind, 2, hidden_sizes=(8, 8)), np.random.default_rng(seed))
     minibatch = minibatch_for(agent, rng, 12)
     loss = ch10_ppo_update.loss_and_grad(agent, minibatch, config)
     grads = agent.grads.copy()
@@ -212,8 +212,7 @@ def test_ppo_loss_and_update(seed, kind):
     same(grads, agent.grads)
 
     # the epochs of Trainer.run_update, written with minippo's update_minibatch, from the same parameters and rng
-    twin = ActorCritic(4, kind, 2, hidden_sizes=(8, 8))
-    twin.params[...] = agent.params
+    twin = agent.copy()
     adam, twin_adam = Adam(agent.params, lr=1e-3), Adam(twin.params, lr=1e-3)
     steps = ch10_ppo_update.ppo_update(agent, adam, minibatch, config, np.random.default_rng(5))
     twin_rng = np.random.default_rng(5)
@@ -232,7 +231,7 @@ def test_rollout_with_clipped_continuous_actions(seed):
     # episodes are truncated inside the batches), two batches, the observation statistics on; chapter 10's grading
     # test does the same on CartPole-v1, whose actions are discrete
     T, N = 40, 2
-    agent = ActorCritic(3, "continuous", 1, (8, 8), log_std_init=0.5, rng=np.random.default_rng(seed), dtype="float64")
+    agent = ActorCritic(AgentSpec(3, "continuous", 1, (8, 8), log_std_init=0.5), np.random.default_rng(seed))
 
     def environments():
         return [TimeLimit(make_env("Pendulum-v1"), max_episode_steps=30) for _ in range(N)]
