@@ -1,7 +1,7 @@
 """The thresholds of ``minippo doctor``'s rules, set on the calibration runs only, and the doctor's confusion table on
 either part of the campaign (benchmarks/doctor_runs.py).
 
-    python -m benchmarks.doctor_calibrate calibrate [--runs DIR]      # minippo/doctor_thresholds.json
+    python -m benchmarks.doctor_calibrate calibrate [--runs DIR]      # thresholds, rule table, the atlas's record
     python -m benchmarks.doctor_calibrate evaluate --part calibration  # results/doctor_confusion_calibration.csv
     python -m benchmarks.doctor_calibrate evaluate --part held-out     # once, at the end: runs no threshold saw
 
@@ -26,6 +26,11 @@ Its second condition's cut is tried at each run of the rule's faults in turn; at
 threshold is set by the principle above against the other runs the second lets through, and the cut that lets the
 rule catch the most runs of its faults is kept (the tightest, on a tie). The second condition's threshold is then set
 by the principle against the other runs that meet the first.
+
+``calibrate`` writes, in one go, everything the chapter's tables are made from: minippo/doctor_thresholds.json, the
+rule table as the code then has it (results/doctor_rules.csv, one row per condition of each rule in doctor.RULES) and
+the atlas's record summarised from its runs (``benchmarks.atlas summarize``: results/atlas_healthy_ranges.csv,
+atlas_signatures.csv, atlas_features.csv).
 
 ``evaluate`` runs the doctor, with the thresholds of the file, on every recorded run of a part: per rule its false
 alarms on healthy runs and its recall on the broken runs of the faults it names, and overall the healthy runs
@@ -52,6 +57,9 @@ from minippo.records import read_rows
 MANIFEST_CSV = common.RESULTS / "doctor_manifest.csv"  # benchmarks/doctor_runs.py plan
 RUN_ROOT = common.RUNS / "doctor"
 ATLAS_CSV = common.RESULTS / "atlas_runs.csv"
+RULES_CSV = common.RESULTS / "doctor_rules.csv"  # the rule table, as doctor.RULES has it after calibrate
+RULE_FIELDS = ["rule", "condition", "variable", "window", "statistic", "level", "comparison", "threshold",
+               "healthy_low", "healthy_high", "anchor", "causes"]  # fmt: skip
 PARTS = ("calibration", "held-out")
 CALIBRATION = "calibration"
 CODE = ("minippo", "benchmarks/doctor_calibrate.py", ":(exclude)minippo/doctor_thresholds.json")  # what sets them
@@ -294,6 +302,22 @@ def calibrate(runs_dir: Path, record_json: Path | None, manifest_csv: Path, atla
     return record
 
 
+def rule_rows(rules) -> list[dict]:
+    """The rule table: a row per condition of each rule (the first, then ``also``), its threshold and healthy range in
+    the 4 significant digits the doctor prints, its section and its causes."""
+    rows = []
+    for rule in rules:
+        for which, condition in zip(("first", "also"), rule.conditions):
+            rows.append({"rule": rule.id, "condition": which, "variable": condition.variable,
+                         "window": condition.window, "statistic": condition.statistic,
+                         "level": "" if condition.level is None else f"{condition.level:.4g}",
+                         "comparison": condition.comparison, "threshold": f"{condition.threshold:.4g}",
+                         "healthy_low": f"{condition.healthy[0]:.4g}", "healthy_high": f"{condition.healthy[1]:.4g}",
+                         "anchor": rule.anchor if which == "first" else "",
+                         "causes": " | ".join(rule.causes) if which == "first" else ""})  # fmt: skip
+    return rows
+
+
 def calibration_table(record: dict) -> str:
     rows = []
     for rule_id, entry in record["rules"].items():
@@ -408,15 +432,24 @@ def main(argv=None) -> int:
                          "doctor_runs.json)")  # fmt: skip
         sub.add_argument("--manifest", type=Path, default=MANIFEST_CSV)
         sub.add_argument("--thresholds", type=Path, default=doctor.THRESHOLDS_JSON)
-    calibrating.add_argument("--no-atlas", action="store_true", help="leave the atlas's record out")
+    calibrating.add_argument("--no-atlas", action="store_true", help="leave the atlas's record out (and do not "
+                             "summarise it again)")  # fmt: skip
+    calibrating.add_argument("--rules", type=Path, default=RULES_CSV, help="the rule table (default: "
+                             "results/doctor_rules.csv)")  # fmt: skip
     evaluating.add_argument("--out", type=Path, help="default: results/doctor_confusion_PART.csv")
     args = parser.parse_args(argv)
     if args.command == "calibrate":
+        if not args.no_atlas:
+            from benchmarks import atlas_signatures
+
+            atlas_signatures.summarize()  # the atlas's record, from its runs
         record = calibrate(args.runs, args.record, args.manifest, None if args.no_atlas else ATLAS_CSV,
                            args.thresholds, argv)  # fmt: skip
+        common.write_rows(args.rules, rule_rows(doctor.calibrated(doctor.SIGNATURES, record)), RULE_FIELDS)
         print(f"{common.relative(args.thresholds)}: {len(record['rules'])} rules from "
               + ", ".join(f"{n} {what}" for what, n in record["runs"][CALIBRATION].items()))
         print(calibration_table(record))
+        print(f"{common.relative(args.rules)}: the rule table")
         return 0
     out = args.out or common.RESULTS / f"doctor_confusion_{args.part}.csv"
     print(evaluate(args.part, args.runs, args.record, args.manifest, args.thresholds, out))

@@ -10,7 +10,7 @@ import pytest
 
 from benchmarks import doctor_calibrate as dc
 from minippo import doctor
-from minippo.records import write_rows
+from minippo.records import read_rows, write_rows
 from minippo.run_folder import PROGRESS_FIELDS
 
 N = 40  # updates of a synthetic run
@@ -214,3 +214,13 @@ def test_each_rule_names_faults_that_exist_and_each_campaign_fault_is_named_by_t
     assert set().union(*dc.FAULTS_NAMED.values()) <= set(FAULTS) | atlas_modes
     for fault, (_, _, cause, _) in FAULTS.items():
         assert fault in dc.FAULTS_NAMED[cause], fault
+
+
+def test_the_committed_rule_table_is_the_codes():
+    """results/doctor_rules.csv, which `calibrate` writes beside the thresholds, is doctor.RULES as the code has them:
+    a threshold changed in minippo/doctor_thresholds.json, or a rule changed in doctor.py, without calibrating again
+    shows here."""
+    rows = read_rows(dc.RULES_CSV)
+    assert rows == dc.rule_rows(doctor.RULES)
+    assert [row["rule"] for row in rows if row["condition"] == "first"] == [rule.id for rule in doctor.RULES]
+    assert [row["rule"] for row in rows if row["condition"] == "also"] == [r.id for r in doctor.RULES if r.also]
