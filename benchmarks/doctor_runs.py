@@ -71,11 +71,11 @@ FAULTS = {
     "lr_x10": ("lr", lambda v: 10 * v, "kl-spike", "atlas-step-size"),
     "lr_x30": ("lr", lambda v: 30 * v, "kl-spike", "atlas-step-size"),
     "epochs_50": ("epochs", lambda v: 50, "kl-high", "atlas-step-size"),
-    "clip_10": ("clip", lambda v: 10.0, "no-clip", ""),  # ε = 10: r_t never leaves [1 − ε, 1 + ε]
+    "clip_10": ("clip", lambda v: 10.0, "no-clip", "atlas-clip"),  # ε = 10: r_t never leaves [1 − ε, 1 + ε]
     "ent_-0.01": ("ent", lambda v: -0.01, "entropy-collapse", "atlas-entropy"),
     "ent_-0.05": ("ent", lambda v: -0.05, "entropy-collapse", "atlas-entropy"),
     "vf_0": ("vf", lambda v: 0.0, "critic-worse-than-constant", "atlas-value-loss"),
-    "reward_zero": (None, None, "not-ppo-reward", ""),  # the environment pays 0 at every step (ZeroReward)
+    "reward_zero": (None, None, "not-ppo-reward", "atlas-reward"),  # the environment pays 0 at every step (ZeroReward)
 }
 FIELDS = {  # each library's name for a neutral setting
     "minippo": dict(lr="lr", epochs="epochs", clip="clip_epsilon", ent="entropy_coef", vf="value_coef"),

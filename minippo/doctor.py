@@ -38,6 +38,8 @@ ANCHORS = {  # the sections of the atlas chapter that a finding sends the reader
     "atlas-ratio": "the ratio against the current policy",
     "atlas-log-prob": "the Gaussian log-density over the wrong axis",
     "atlas-discount": "no discount: γ = 1",
+    "atlas-clip": "the clip range far too large",
+    "atlas-reward": "a reward that never changes: not PPO",
     "atlas-healthy": "the healthy ranges",
 }
 MIN_UPDATES = 10  # the shortest window of a rule, and the span of a rolling median
@@ -193,7 +195,7 @@ SIGNATURES = (
     Rule("not-ppo-reward", "return_mean", "all updates", "relative spread", "<", math.nan,
          ("not PPO: the environment pays 0 (or the same) at every step; check the reward and the environment, on "
           f"probe environments with known answers ({PROBES})",),
-         "atlas-healthy", (math.nan, math.nan)),
+         "atlas-reward", (math.nan, math.nan)),
     # the ratio fault logs approx_kl = 0 exactly at every update. A run whose policy collapsed after steps far too
     # large has a large KL first, so it is not taken for this
     Rule("policy-never-moves", "approx_kl", "all updates", "max", "<", math.nan,
@@ -203,7 +205,7 @@ SIGNATURES = (
     # ε is too wide to bind (or the clip is not applied)
     Rule("no-clip", "approx_kl", "all updates", "median", ">", math.nan,
          ("the clip range ε far too large, or the clip not applied: nothing holds the update near θ_old",),
-         "atlas-step-size", (math.nan, math.nan),
+         "atlas-clip", (math.nan, math.nan),
          also=Condition("clip_fraction", "all updates", "median", "<")),
     # the entropy's last minus its first: an entropy bonus far too large, or σ left without a gradient to shrink
     Rule("entropy-rises", "entropy", "all updates", "last minus first", ">", math.nan,
