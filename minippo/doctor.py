@@ -202,9 +202,9 @@ SIGNATURES = (
          ("the ratio r_t computed against the current policy, not θ_old: r_t = 1 and the clip never engages",),
          "atlas-ratio", (math.nan, math.nan)),
     # a KL far above healthy while the clip fraction stays near 0: the ratios leave [1 − ε, 1 + ε] for no sample, so
-    # ε is too wide to bind (or the clip is not applied)
+    # ε is too wide to bind (a clip dropped from the loss by a bug would still log a high clip fraction)
     Rule("no-clip", "approx_kl", "all updates", "median", ">", math.nan,
-         ("the clip range ε far too large, or the clip not applied: nothing holds the update near θ_old",),
+         ("the clip range ε far too large: no ratio reaches 1 ± ε, so nothing holds the update near θ_old",),
          "atlas-clip", (math.nan, math.nan),
          also=Condition("clip_fraction", "all updates", "median", "<")),
     # the entropy's last minus its first: an entropy bonus far too large, or σ left without a gradient to shrink
