@@ -69,6 +69,7 @@ def test_the_evaluator_reads_the_window_and_the_statistic():
     assert found[1].value == pytest.approx(0.25)
 
 
+@pytest.mark.slow  # trains the broken run (broken_run)
 def test_the_broken_cartpole_run_names_the_step_size_or_the_epochs_first(broken_run, capsys):
     kind, rows = read_run(broken_run)
     assert kind == "minippo" and len(rows) == 40
@@ -79,7 +80,8 @@ def test_the_broken_cartpole_run_names_the_step_size_or_the_epochs_first(broken_
     assert findings[0].rule.causes[0] in out and f"#{findings[0].rule.anchor}" in out
 
 
-@pytest.mark.parametrize("seed", [1, 2, 3])
+# one seed in the quick tier, the other two (training runs of 40 updates each) in the slow one
+@pytest.mark.parametrize("seed", [1, pytest.param(2, marks=pytest.mark.slow), pytest.param(3, marks=pytest.mark.slow)])
 def test_healthy_short_cartpole_runs_raise_no_alarm(tmp_path, seed, capsys):
     run = cartpole(tmp_path / "healthy", seed)
     assert diagnose(read_run(run)[1]) == []
@@ -261,7 +263,8 @@ def test_the_atlas_runs_are_named_by_their_rule_and_no_healthy_run_is_flagged():
         ("lr_100x_epochs_40", 25, STEP_SIZE_RULES),  # over 10 updates its KL (about 0.02) is within the margin
         ("ratio_vs_current_policy", 10, {"policy-never-moves"}),
         ("minibatch_whole", 10, {"policy-barely-moves"}),
-        ("value_loss_sign", 150, {"value-loss-grows"}),  # the value loss grows slowly: the atlas's length
+        # the value loss grows slowly: the atlas's length (150 updates of training: a slow test)
+        pytest.param("value_loss_sign", 150, {"value-loss-grows"}, marks=pytest.mark.slow),
     ],
 )
 def test_a_short_cartpole_run_with_a_fault_is_named_by_its_rule(mode, updates, rules, tmp_path):

@@ -89,6 +89,7 @@ def test_clip_annealing_follows_the_step_size(monkeypatch, anneal_clip):
         assert seen == pytest.approx([0.2 * alpha if anneal_clip else 0.2] * len(seen))
 
 
+@pytest.mark.slow  # a learning run
 def test_a2c_learns_cartpole():
     # the A2C preset's algorithm (one L^PG step a batch of 16 × 5) on CartPole's MLP: the return climbs well above a
     # random policy's (about 22)
