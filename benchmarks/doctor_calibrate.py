@@ -28,9 +28,9 @@ rule catch the most runs of its faults is kept (the tightest, on a tie). The sec
 by the principle against the other runs that meet the first.
 
 ``calibrate`` writes, in one go, everything the chapter's tables are made from: minippo/doctor_thresholds.json, the
-rule table as the code then has it (results/doctor_rules.csv, one row per condition of each rule in doctor.RULES) and
-the atlas's record summarised from its runs (``benchmarks.atlas summarize``: results/atlas_healthy_ranges.csv,
-atlas_signatures.csv, atlas_features.csv).
+rule table as the code then has it (results/doctor_rules.csv: a row per check of the settings in doctor.CHECKS, then per
+condition of each rule in doctor.RULES) and the atlas's record summarised from its runs (``benchmarks.atlas
+summarize``: results/atlas_healthy_ranges.csv, atlas_signatures.csv, atlas_features.csv).
 
 ``evaluate`` runs the doctor, with the thresholds of the file, on every recorded run of a part: per rule its false
 alarms on healthy runs and its recall on the broken runs of the faults it names, and overall the healthy runs
@@ -43,7 +43,7 @@ import argparse
 import datetime
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -74,6 +74,9 @@ LOG_STATISTICS = {"max", "min", "median", "mean", "largest rolling median", "las
 # (atlas.FAULTS). The step-size rules name the same three causes in different orders
 STEP_SIZE = ("lr_x10", "lr_x30", "epochs_50", "lr_10x", "lr_100x_epochs_40", "minibatch_4")
 FAULTS_NAMED = {
+    "entropy-bonus-negative": ("ent_-0.01", "ent_-0.05"),  # the checks of the settings (doctor.CHECKS)
+    "critic-not-trained": ("vf_0",),
+    "clip-cannot-bind": ("clip_10",),
     "not-ppo-reward": ("reward_zero",),
     "policy-never-moves": ("ratio_vs_current_policy",),
     "no-clip": ("clip_10",),
@@ -98,6 +101,7 @@ class Run:
     fault: str  # "healthy", a key of doctor_runs.FAULTS or a mode of the atlas
     cause: str  # the rule the manifest expects first ("" for healthy runs and the atlas)
     rows: list
+    settings: dict = field(default_factory=dict)  # the settings its log carries (doctor_logs.SETTINGS)
 
     @property
     def healthy(self) -> bool:
@@ -130,17 +134,18 @@ def read_part(part: str, runs_dir: Path, manifest_csv: Path = MANIFEST_CSV, reco
             left_out["not made yet"] = left_out.get("not made yet", 0) + 1
             continue
         try:
-            rows = read_log(runs_dir / entry["id"]).rows
+            log = read_log(runs_dir / entry["id"])
+            rows, settings = log.rows, log.settings
         except MinippoError as error:
             if done[entry["id"]] == "ok":
                 raise common.BenchmarkError(f"run {entry['id']} is recorded but its log cannot be read: "
                                             f"{error}") from None  # fmt: skip
-            rows = []  # stopped before its log had a row
+            rows, settings = [], {}  # stopped before its log had a row
         if len(rows) < doctor.MIN_UPDATES:  # a run stopped early by a non-finite loss: too short to judge
             left_out["under 10 updates"] = left_out.get("under 10 updates", 0) + 1
             continue
         runs.append(Run(entry["id"], "campaign", entry["part"], entry["library"], entry["task"], entry["fault"],
-                        entry["cause"], rows))  # fmt: skip
+                        entry["cause"], rows, settings))  # fmt: skip
     return runs, left_out
 
 
@@ -302,10 +307,14 @@ def calibrate(runs_dir: Path, record_json: Path | None, manifest_csv: Path, atla
     return record
 
 
-def rule_rows(rules) -> list[dict]:
-    """The rule table: a row per condition of each rule (the first, then ``also``), its threshold and healthy range in
-    the 4 significant digits the doctor prints, its section and its causes."""
-    rows = []
+def rule_rows(rules, checks=doctor.CHECKS) -> list[dict]:
+    """The rule table: a row per check of the settings (its bound, by definition), then a row per condition of each
+    rule (the first, then ``also``), its threshold and healthy range in the 4 significant digits the doctor prints,
+    its section and its causes."""
+    rows = [{"rule": check.id, "condition": "setting", "variable": check.setting, "window": "", "statistic": "",
+             "level": "", "comparison": check.comparison, "threshold": f"{check.bound:.4g}", "healthy_low": "",
+             "healthy_high": "", "anchor": check.anchor, "causes": " | ".join(check.causes)}
+            for check in checks]  # fmt: skip
     for rule in rules:
         for which, condition in zip(("first", "also"), rule.conditions):
             rows.append({"rule": rule.id, "condition": which, "variable": condition.variable,
@@ -355,40 +364,50 @@ def verdicts_path(out_csv: Path) -> Path:
                              + ".csv")  # fmt: skip
 
 
+def _overall(name: str, healthy: list, broken: list, verdicts: dict) -> dict:
+    return {"kind": "overall", "name": name, "healthy_runs": len(healthy),
+            "false_alarms": sum(bool(verdicts[run.id]) for run in healthy), "broken_runs": len(broken),
+            "flagged": sum(bool(verdicts[run.id]) for run in broken),
+            "first_right": sum(bool(verdicts[run.id]) and names_fault(verdicts[run.id][0], run.fault)
+                               for run in broken),
+            "first_rule_expected": sum(verdicts[run.id][:1] == [run.cause] for run in broken)}  # fmt: skip
+
+
 def evaluate(part: str, runs_dir: Path, record_json: Path | None, manifest_csv: Path, thresholds_json: Path,
              out_csv: Path) -> str:  # fmt: skip
+    """The doctor on every recorded run of ``part``: the checks of the settings its log carries, then the rules; and
+    again with the rules alone (what the doctor makes of a log without settings)."""
     table = doctor.load_thresholds(thresholds_json)
     rules = doctor.calibrated(doctor.SIGNATURES, table)
     runs, left_out = read_part(part, runs_dir, manifest_csv, record_json)
-    verdicts = {run.id: [f.rule.id for f in doctor.diagnose(run.rows, rules)] for run in runs}
+    verdicts = {run.id: [f.rule.id for f in doctor.diagnose(run.rows, rules, run.settings)] for run in runs}
+    logs_only = {run.id: [f.rule.id for f in doctor.diagnose(run.rows, rules, checks=())] for run in runs}
     healthy = [run for run in runs if run.healthy]
     broken = [run for run in runs if not run.healthy]
     rows = []
-    for rule in rules:
+    for rule in (*doctor.CHECKS, *rules):
         mine = [run for run in broken if names_fault(rule.id, run.fault)]
         alarms = sum(rule.id in verdicts[run.id] for run in healthy)
         caught = sum(rule.id in verdicts[run.id] for run in mine)
-        rows.append({"kind": "rule", "name": rule.id, "healthy_runs": len(healthy), "false_alarms": alarms,
-                     "broken_runs": len(mine), "flagged": caught,
+        rows.append({"kind": "check" if isinstance(rule, doctor.Check) else "rule", "name": rule.id,
+                     "healthy_runs": len(healthy), "false_alarms": alarms, "broken_runs": len(mine), "flagged": caught,
                      "first_right": sum(verdicts[run.id][:1] == [rule.id] for run in mine)})  # fmt: skip
     for fault in dict.fromkeys(run.fault for run in broken):
         mine = [run for run in broken if run.fault == fault]
-        rows.append({"kind": "fault", "name": fault, "broken_runs": len(mine),
-                     "flagged": sum(bool(verdicts[run.id]) for run in mine),
-                     "first_right": sum(bool(verdicts[run.id]) and names_fault(verdicts[run.id][0], fault)
-                                        for run in mine),
-                     "first_rule_expected": sum(verdicts[run.id][:1] == [run.cause] for run in mine)})  # fmt: skip
-    rows.append({"kind": "overall", "name": "all runs", "healthy_runs": len(healthy),
-                 "false_alarms": sum(bool(verdicts[run.id]) for run in healthy), "broken_runs": len(broken),
-                 "flagged": sum(bool(verdicts[run.id]) for run in broken),
-                 "first_right": sum(bool(verdicts[run.id]) and names_fault(verdicts[run.id][0], run.fault)
-                                    for run in broken),
-                 "first_rule_expected": sum(verdicts[run.id][:1] == [run.cause] for run in broken)})  # fmt: skip
+        for kind, found in (("fault", verdicts), ("fault, rules only", logs_only)):
+            rows.append({"kind": kind, "name": fault, "broken_runs": len(mine),
+                         "flagged": sum(bool(found[run.id]) for run in mine),
+                         "first_right": sum(bool(found[run.id]) and names_fault(found[run.id][0], fault)
+                                            for run in mine),
+                         "first_rule_expected": sum(found[run.id][:1] == [run.cause] for run in mine)})  # fmt: skip
+    rows.append(_overall("all runs", healthy, broken, verdicts))
+    rows.append(_overall("all runs, rules only", healthy, broken, logs_only))
     fields = ["kind", "name", "healthy_runs", "false_alarms", "broken_runs", "flagged", "first_right",
               "first_rule_expected"]  # fmt: skip
     common.write_rows(out_csv, rows, fields)
     per_run = [{"id": run.id, "library": run.library, "task": run.task, "fault": run.fault, "updates": len(run.rows),
-                "findings": " ".join(verdicts[run.id]) or "none"} for run in runs]  # fmt: skip
+                "settings": "yes" if run.settings else "no", "findings": " ".join(verdicts[run.id]) or "none",
+                "rules_only": " ".join(logs_only[run.id]) or "none"} for run in runs]  # fmt: skip
     common.write_rows(verdicts_path(out_csv), per_run)
     return confusion_markdown(part, rows, left_out, table)
 
@@ -398,24 +417,32 @@ def _share(count: int, total: int) -> str:
 
 
 def confusion_markdown(part: str, rows: list[dict], left_out: dict, table: dict) -> str:
-    by_rule = [[f"`{r['name']}`", _share(r["false_alarms"], r["healthy_runs"]), _share(r["flagged"], r["broken_runs"]),
-                str(r["first_right"])] for r in rows if r["kind"] == "rule"]  # fmt: skip
-    by_fault = [[f"`{r['name']}`", _share(r["flagged"], r["broken_runs"]), _share(r["first_right"], r["broken_runs"])]
-                for r in rows if r["kind"] == "fault"]  # fmt: skip
-    total = next(r for r in rows if r["kind"] == "overall")
+    by_rule = [[f"`{r['name']}`" + " (setting)" * (r["kind"] == "check"), _share(r["false_alarms"], r["healthy_runs"]),
+                _share(r["flagged"], r["broken_runs"]), str(r["first_right"])]
+               for r in rows if r["kind"] in ("check", "rule")]  # fmt: skip
+    alone = {r["name"]: r for r in rows if r["kind"] == "fault, rules only"}
+    by_fault = [[f"`{r['name']}`", _share(r["flagged"], r["broken_runs"]), _share(r["first_right"], r["broken_runs"]),
+                 _share(alone[r["name"]]["flagged"], r["broken_runs"]),
+                 _share(alone[r["name"]]["first_right"], r["broken_runs"])] for r in rows if r["kind"] == "fault"]
+    total, rules_only = (next(r for r in rows if r["name"] == name) for name in ("all runs", "all runs, rules only"))
     skipped = ", ".join(f"{n} {why}" for why, n in left_out.items())
+
+    def measures(r):
+        return [_share(r["false_alarms"], r["healthy_runs"]), _share(r["flagged"], r["broken_runs"]),
+                _share(r["first_right"], r["broken_runs"]), _share(r["first_rule_expected"], r["broken_runs"])]
+
     return "\n\n".join([
         f"{part}: {total['healthy_runs']} healthy and {total['broken_runs']} broken runs"
         + (f" ({skipped}, left out)" if skipped else "")
         + f"; thresholds of {table.get('date', '?')}, commit {table.get('commit', '?')}",
         common_markdown(["rule", "false alarms (healthy runs)", "recall (runs of the faults it names)",
                          "named first"], by_rule),
-        common_markdown(["fault", "flagged", "right cause first"], by_fault),
-        common_markdown(["measure", "value"], [
-            ["healthy runs flagged (false alarms)", _share(total["false_alarms"], total["healthy_runs"])],
-            ["broken runs flagged", _share(total["flagged"], total["broken_runs"])],
-            ["the right cause named first", _share(total["first_right"], total["broken_runs"])],
-            ["the manifest's rule named first", _share(total["first_rule_expected"], total["broken_runs"])]]),
+        common_markdown(["fault", "flagged", "right cause first", "flagged, rules only",
+                         "right cause first, rules only"], by_fault),
+        common_markdown(["measure", "with the settings checks", "rules only"], [
+            [name, *pair] for name, *pair in zip(
+                ["healthy runs flagged (false alarms)", "broken runs flagged", "the right cause named first",
+                 "the manifest's rule named first"], measures(total), measures(rules_only))]),
     ])  # fmt: skip
 
 

@@ -4,13 +4,19 @@ Reads minippo's progress.csv, Stable-Baselines3's CSV or TensorBoard log, CleanR
 export of either; minippo/doctor_logs.py reads them, and its SOURCES table maps each one's columns to minippo's names
 and units. A rule whose variable the log lacks (or has on too few updates) is reported as not checked, not as clean.
 
+Where the log carries the run's settings (minippo's config.json, rl-zoo's config.yml beside an SB3 log, CleanRL's
+hyperparameters table), the doctor first checks them (CHECKS) against bounds that PPO's objective sets by definition:
+an entropy coefficient below 0, a value coefficient of 0 or below, a clip range of 1 or more. These bounds are not
+calibrated: no healthy run can cross them.
+
 Each rule compares a statistic of a variable over a window with a threshold; a relative signature adds a second
 condition on another variable. The thresholds and the healthy ranges shown beside them are not written here: they are
 in minippo/doctor_thresholds.json, which ``python -m benchmarks.doctor_calibrate calibrate`` writes from calibration
 runs only (runs of minippo, Stable-Baselines3 and CleanRL, healthy and broken, and the atlas's record).
 
-Exit status: 0 when every rule was checked and none holds, 1 when one holds, 2 on bad input, 3 when none holds but some
-rules could not be checked.
+Exit status: 0 when every rule was checked and none holds, 1 when a rule or a check of the settings holds, 2 on bad
+input, 3 when none holds but some rules could not be checked. A log without settings says so in a note; it does not
+change the status.
 """
 
 from __future__ import annotations
@@ -245,6 +251,42 @@ SIGNATURES = (
 )  # fmt: skip
 
 
+@dataclass(frozen=True)
+class Check:
+    """A setting outside the range in which PPO's objective (eq. 9) does what it is for: a bound by definition, not a
+    threshold calibrated on runs."""
+
+    id: str
+    setting: str  # a key of doctor_logs.SETTINGS
+    comparison: str  # <, <= or >=
+    bound: float
+    why: str  # what goes wrong beyond the bound
+    causes: tuple[str, ...]
+    anchor: str  # a key of ANCHORS
+
+    def holds(self, settings: dict) -> bool:
+        value = settings.get(self.setting)
+        if value is None or not math.isfinite(value):
+            return False
+        return {"<": value < self.bound, "<=": value <= self.bound, ">=": value >= self.bound}[self.comparison]
+
+
+CHECKS = (
+    Check("entropy-bonus-negative", "entropy_coef", "<", 0.0,
+          "c2 < 0 makes eq. 9's entropy bonus a penalty: it pays the policy for being certain",
+          ("an entropy coefficient with the wrong sign (c2 < 0): the bonus pushes the policy towards certainty",),
+          "atlas-entropy"),
+    Check("critic-not-trained", "value_coef", "<=", 0.0,
+          "with c1 ≤ 0 the value loss of eq. 9 gives the critic no gradient (c1 = 0) or one that climbs its error",
+          ("the value loss weighted 0 (c1 = 0): the critic is never trained, and the advantages use its first guess",),
+          "atlas-value-loss"),
+    Check("clip-cannot-bind", "clip_epsilon", ">=", 1.0,
+          "with ε ≥ 1 the lower clip 1 − ε ≤ 0 is never reached (a ratio is positive), and 1 + ε seldom is",
+          ("the clip range ε far too large: no ratio reaches 1 ± ε, so nothing holds the update near θ_old",),
+          "atlas-clip"),
+)  # fmt: skip
+
+
 def load_thresholds(path=THRESHOLDS_JSON) -> dict:
     """The calibrated thresholds: {"rules": {rule id: {"threshold", "healthy", "also": {...}}}, and how they were
     set}; an empty table when the file is missing."""
@@ -300,6 +342,27 @@ class Finding:
         ]
 
 
+@dataclass(frozen=True)
+class SettingFinding:
+    """A check of the settings that holds: ``rule`` (a Check) and the setting's value."""
+
+    rule: Check
+    value: float
+    settings_file: str = ""
+
+    def lines(self) -> list[str]:
+        check = self.rule
+        return [f"setting {check.setting} = {self.value:.4g} ({check.comparison} {check.bound:g} by definition; read "
+                f"from {self.settings_file})  [{check.id}]", f"  {check.why}",
+                "  likely causes, likeliest first: " + "; ".join(check.causes),
+                f"  read: {CHAPTER}#{check.anchor} ({ANCHORS[check.anchor]})"]  # fmt: skip
+
+
+def check_settings(settings: dict, checks=CHECKS, settings_file: str = "") -> list[SettingFinding]:
+    """The checks that hold on ``settings`` (doctor_logs.SETTINGS names: values), in the order of ``checks``."""
+    return [SettingFinding(check, settings[check.setting], settings_file) for check in checks if check.holds(settings)]
+
+
 def read_run(path) -> tuple[str, list[dict]]:
     """(the source: "minippo", "sb3" or "cleanrl", the rows of updates in minippo's names and units) of the log at
     ``path`` (minippo/doctor_logs.py reads it)."""
@@ -307,11 +370,12 @@ def read_run(path) -> tuple[str, list[dict]]:
     return log.source, log.rows
 
 
-def diagnose(rows: list[dict], rules=RULES) -> list[Finding]:
-    """The rules that hold on ``rows`` (one dict per update, minippo's names), in the order of ``rules``."""
+def diagnose(rows: list[dict], rules=RULES, settings: dict | None = None, checks=CHECKS) -> list:
+    """The checks of ``settings`` that hold (SettingFinding), then the rules that hold on ``rows`` (one dict per
+    update, minippo's names; Finding), each in its order."""
     if len(rows) < MIN_UPDATES:
         raise MinippoError(f"{len(rows)} updates are too few to judge: the doctor needs at least {MIN_UPDATES}")
-    findings = []
+    findings = check_settings(settings or {}, checks)
     for rule in rules:
         value, first, last = rule.measure(rows)
         also_value = rule.also.measure(rows)[0] if rule.also else math.nan
@@ -326,10 +390,12 @@ def _finite(value: float) -> float | None:
 
 def report(path, as_json: bool = False) -> tuple[str, int]:
     """The doctor's report of the run at ``path`` and its exit status: 0 when every rule was checked and none holds, 1
-    when one holds, 3 when none holds but some rules could not be checked (their data is missing)."""
+    when a rule or a check of the settings holds, 3 when none holds but some rules could not be checked (their data
+    is missing)."""
     log = read_log(path)
     rows = log.rows
-    findings = diagnose(rows)
+    settings_found = check_settings(log.settings, CHECKS, log.settings_file or "")
+    findings = settings_found + diagnose(rows, RULES, checks=())
     missing = {rule.id: rule.missing(rows, log) for rule in RULES}
     if all(missing.values()):
         reasons = dict.fromkeys(reason.split(": ", 1)[1] for reason in missing.values())
@@ -339,14 +405,19 @@ def report(path, as_json: bool = False) -> tuple[str, int]:
     if as_json:
 
         def described(rule, value, first, last, also_value):
-            return {**asdict(rule), "value": _finite(value), "updates": [first, last],
+            return {**asdict(rule), "kind": "signature", "value": _finite(value), "updates": [first, last],
                     "also_value": _finite(also_value) if rule.also else None, "found": rule.holds(value, also_value),
                     "missing": missing[rule.id], "read": f"{CHAPTER}#{rule.anchor}"}  # fmt: skip
 
+        def setting(finding):
+            return {**asdict(finding.rule), "kind": "setting", "value": finding.value, "found": True,
+                    "read": f"{CHAPTER}#{finding.rule.anchor}"}  # fmt: skip
+
         text = json.dumps({"run": str(path), "format": log.source, "file": log.file, "updates": len(rows),
-                           "notes": log.notes,
-                           "findings": [described(f.rule, f.value, f.first_update, f.last_update, f.also_value)
-                                        for f in findings],
+                           "notes": log.notes, "settings": log.settings, "settings_file": log.settings_file,
+                           "findings": [setting(f) for f in settings_found]
+                                       + [described(f.rule, f.value, f.first_update, f.last_update, f.also_value)
+                                          for f in findings[len(settings_found):]],
                            "checked": [described(*m) for m in measured],
                            "not_checked": [rule.id for rule in RULES if missing[rule.id]]},
                           indent=1, allow_nan=False)  # fmt: skip
@@ -357,7 +428,10 @@ def report(path, as_json: bool = False) -> tuple[str, int]:
     lines = [head, *(f"  note: {note}" for note in log.notes)]
     checked = [m for m in measured if not missing[m[0].id]]
     if findings:
-        lines += [f"{len(findings)} failure signature{'s' * (len(findings) > 1)} found:"]
+        signatures = len(findings) - len(settings_found)
+        found = [f"{len(settings_found)} setting{'s' * (len(settings_found) > 1)} out of bounds"] * bool(settings_found)
+        found += [f"{signatures} failure signature{'s' * (signatures > 1)}"] * bool(signatures)
+        lines += [" and ".join(found) + " found:"]
         for number, finding in enumerate(findings, 1):
             first, *rest = finding.lines()
             lines += [f"{number}. {first}", *rest]
@@ -365,6 +439,10 @@ def report(path, as_json: bool = False) -> tuple[str, int]:
         by = f"by the {len(checked)} rules of {len(RULES)} that could be checked " if len(checked) < len(RULES) else ""
         lines += [f"no failure signature found {by}in {len(rows)} updates; what was checked, against the healthy "
                   f"ranges ({CHAPTER}#atlas-healthy):"]  # fmt: skip
+        if log.settings_file:
+            lines += [f"  settings ({log.settings_file}): " + ", ".join(
+                f"{check.setting} = {log.settings[check.setting]:.4g} (bound: {check.comparison} {check.bound:g})"
+                for check in CHECKS if check.setting in log.settings)]  # fmt: skip
         for rule, value, first, last, also_value in checked:
             line = (f"  {rule.condition.describe()} over updates {first}-{last} = {value:.4g} (flagged "
                     f"{rule.comparison} {rule.threshold:.4g}; healthy runs: {_range(rule.healthy)})")

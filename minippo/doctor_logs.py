@@ -8,6 +8,10 @@ A run is a CSV file, a TensorBoard events file, or a folder holding progress.csv
 - CleanRL's ``ppo.py`` and ``ppo_continuous_action.py``: their TensorBoard events (runs/RUN_NAME/);
 - W&B's CSV export of a run of either (its history: the tags as columns, and ``global_step`` or ``_step``).
 
+Where the log carries the run's settings, they are read too (SETTINGS): minippo's config.json beside its progress.csv,
+the config.yml that rl-zoo saves beside an SB3 log (SB3's PPO defaults for what it leaves out), and the hyperparameters
+table CleanRL writes to its events file. A W&B export keeps its run's config apart and is read without settings.
+
 SOURCES holds each source's columns or tags, the factor that turns a value into minippo's units, and when it is
 logged. What differs beyond the factor (minippo's debug variables are over the whole batch after the update):
 
@@ -51,6 +55,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -103,6 +108,18 @@ UNITS = {  # what a reader of the report should know of a source's numbers
     "cleanrl": "CleanRL's approx_kl, entropy and value_loss are the last minibatch's, before its step; return_mean is "
     "the mean of the episodes that ended in each update's rollout",
 }
+# the settings the doctor reads: minippo's name: {source: its name for the setting}, and SB3's PPO defaults (from
+# PPO.__init__), which rl-zoo's config.yml leaves out when a task's entry does not change them
+SETTINGS = {
+    "clip_epsilon": {"minippo": "clip_epsilon", "sb3": "clip_range", "cleanrl": "clip_coef"},
+    "value_coef": {"minippo": "value_coef", "sb3": "vf_coef", "cleanrl": "vf_coef"},
+    "entropy_coef": {"minippo": "entropy_coef", "sb3": "ent_coef", "cleanrl": "ent_coef"},
+    "lr": {"minippo": "lr", "sb3": "learning_rate", "cleanrl": "learning_rate"},
+    "epochs": {"minippo": "epochs", "sb3": "n_epochs", "cleanrl": "update_epochs"},
+}
+SB3_DEFAULTS = {"clip_range": 0.2, "vf_coef": 0.5, "ent_coef": 0.0, "learning_rate": 3e-4, "n_epochs": 10}
+SB3_CONFIG = "config.yml"  # rl-zoo's ExperimentManager saves the hyperparameters of a run under this name
+CLEANRL_HYPERPARAMETERS = "hyperparameters/text_summary"  # writer.add_text("hyperparameters", a markdown table)
 SB3_ITERATIONS, SB3_STEPS = "time/iterations", "time/total_timesteps"  # in SB3's CSV only
 READS = ("minippo's or Stable-Baselines3's progress.csv, a W&B CSV export of an SB3 or CleanRL run (a CSV file: give "
          "its path), or SB3's or CleanRL's TensorBoard event files (with the tensorboard package: "
@@ -119,6 +136,8 @@ class Log:
     rows: list[dict]
     absent: set = field(default_factory=set)  # the FIELDS whose column the log does not have
     notes: list = field(default_factory=list)  # what the reader dropped, assumed or could not find, one line each
+    settings: dict = field(default_factory=dict)  # the run's SETTINGS that the log carries, in minippo's names
+    settings_file: str | None = None  # where they were read, or None when the log carries none
 
     def column(self, name: str) -> str:
         """``name`` and, when the source names it otherwise, its column or tag: ``entropy (train/entropy_loss)``."""
@@ -226,7 +245,10 @@ def _read_events(path: Path) -> Log:
     if source is None:
         raise _unknown(path, tags)
     scalars = {tag: [(event.step, event.value) for event in accumulator.Scalars(tag)] for tag in tags}
-    return _from_scalars(path, source, "TensorBoard events", scalars, [], tags)
+    log = _from_scalars(path, source, "TensorBoard events", scalars, [], tags)
+    if source == "cleanrl" and (named := _cleanrl_hyperparameters(accumulator)):
+        log.settings, log.settings_file = _named_settings("cleanrl", named), f"{path}: {CLEANRL_HYPERPARAMETERS}"
+    return log
 
 
 def _from_scalars(path: Path, source: str, kind: str, scalars: dict, notes: list, names) -> Log:
@@ -325,19 +347,106 @@ def _finished(log: Log, names) -> Log:
     return log
 
 
+def _setting(value) -> float | None:
+    """A setting as a number: rl-zoo's "lin_X" (a schedule falling linearly from X) as X; None when it is not one."""
+    if isinstance(value, str) and value.strip().startswith("lin_"):
+        value = value.strip()[4:]
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return None
+
+
+def _named_settings(source: str, named: dict) -> dict:
+    """The SETTINGS that ``named`` (the source's names: values) holds, in minippo's names."""
+    values = {name: _setting(named.get(names[source])) for name, names in SETTINGS.items()}
+    return {name: value for name, value in values.items() if value is not None}
+
+
+def _sb3_config(file: Path, top: Path, notes: list) -> tuple[dict, str | None]:
+    """The settings in the config.yml nearest the log ``file`` (its folder, then each folder up to ``top``)."""
+    folder = file.parent
+    while True:
+        config = folder / SB3_CONFIG
+        if config.is_file():
+            break
+        if folder == top or folder == folder.parent or top not in folder.parents:
+            return {}, None
+        folder = folder.parent
+    try:
+        import yaml
+    except ImportError:
+        notes.append(f"{config}: reading it needs the PyYAML package (pip install 'minippo[doctor]'): no settings read")
+        return {}, None
+
+    class Loader(yaml.SafeLoader):  # rl-zoo dumps an OrderedDict: a python/object/apply tag over a list of pairs
+        pass
+
+    def ordered(loader, node):
+        return dict(loader.construct_sequence(node, deep=True)[0])
+
+    Loader.add_constructor("tag:yaml.org,2002:python/object/apply:collections.OrderedDict", ordered)
+    try:
+        named = yaml.load(config.read_text(encoding="utf-8"), Loader=Loader)  # noqa: S506 (a SafeLoader)
+    except (yaml.YAMLError, UnicodeDecodeError, ValueError, TypeError, IndexError) as error:
+        notes.append(f"{config} cannot be read as rl-zoo's config.yml ({str(error).splitlines()[0]}): no settings read")
+        return {}, None
+    if not isinstance(named, dict):
+        notes.append(f"{config} holds no table of hyperparameters: no settings read")
+        return {}, None
+    return _named_settings("sb3", SB3_DEFAULTS | named), str(config)
+
+
+def _cleanrl_hyperparameters(accumulator) -> dict:
+    """CleanRL's hyperparameters table (``|param|value|`` rows of markdown) as {param: value}, or {} without one."""
+    if CLEANRL_HYPERPARAMETERS not in accumulator.Tags().get("tensors", ()):
+        return {}
+    text = accumulator.Tensors(CLEANRL_HYPERPARAMETERS)[0].tensor_proto.string_val[0].decode("utf-8", "replace")
+    cells = (line.strip().strip("|").split("|") for line in text.splitlines())
+    return {row[0].strip(): row[1].strip() for row in cells if len(row) == 2}
+
+
+def _with_settings(log: Log, file: Path, top: Path) -> Log:
+    """``log`` with the settings its run left beside it, or a note that it carries none."""
+    if log.source == "minippo" and (file.parent / RunFolder.CONFIG).is_file():
+        config = file.parent / RunFolder.CONFIG
+        try:
+            log.settings, log.settings_file = _named_settings("minippo", json.loads(config.read_text())), str(config)
+        except (ValueError, UnicodeDecodeError) as error:
+            log.notes.append(f"{config} cannot be read as JSON ({error}): no settings read")
+    elif log.source == "sb3" and log.file != "W&B CSV export":
+        log.settings, log.settings_file = _sb3_config(file, top, log.notes)
+    if not log.settings_file:
+        where = {"minippo": f"no {RunFolder.CONFIG} beside {file.name}",
+                 "sb3": f"no {SB3_CONFIG} (rl-zoo saves one) beside the log",
+                 "cleanrl": "no hyperparameters table in the events file"}[log.source]  # fmt: skip
+        if log.file == "W&B CSV export":
+            where = "a W&B export keeps its run's config apart"
+        if not any("no settings read" in note for note in log.notes):
+            log.notes.append(f"the run's settings are not in the log ({where}): the checks of its settings were not "
+                             "made")  # fmt: skip
+    return log
+
+
 def read_log(path) -> Log:
-    """The log at ``path`` (a CSV file, an events file, or a folder holding progress.csv or one run's event files)."""
-    path = Path(path)
+    """The log at ``path`` (a CSV file, an events file, or a folder holding progress.csv or one run's event files), with
+    the run's settings where the log carries them."""
+    log, file = _read_log(Path(path))
+    return _with_settings(log, file, Path(path) if Path(path).is_dir() else file.parent)
+
+
+def _read_log(path: Path) -> tuple[Log, Path]:
+    """The log at ``path``, and the file it was read from (of an events file, any one in its folder)."""
     if path.is_file():
-        return _read_events(path) if "tfevents" in path.name else _read_csv(path)
+        return (_read_events(path) if "tfevents" in path.name else _read_csv(path)), path
     if not path.is_dir():
         raise MinippoError(f"no run folder or log file {path}")
     progress = RunFolder(path).progress_csv  # minippo's, or Stable-Baselines3's of the same name
     if progress.is_file():
-        return _read_csv(progress)
+        return _read_csv(progress), progress
     folders = sorted({events.parent for events in path.rglob("*tfevents*") if events.is_file()})
     if len(folders) == 1:
-        return _read_events(folders[0])
+        return _read_events(folders[0]), next(folders[0].glob("*tfevents*"))
     if len(folders) > 1:
         names = ", ".join(str(folder.relative_to(path)) for folder in folders[:4]) + ", ..." * (len(folders) > 4)
         raise MinippoError(f"{path} holds the TensorBoard event files of {len(folders)} runs ({names}): name one")

@@ -210,7 +210,7 @@ def test_each_rule_names_faults_that_exist_and_each_campaign_fault_is_named_by_t
     from benchmarks.doctor_runs import FAULTS
 
     atlas_modes = set(json.loads((dc.common.RESULTS / "atlas_runs.json").read_text())["modes"])
-    assert set(dc.FAULTS_NAMED) == {rule.id for rule in doctor.SIGNATURES}
+    assert set(dc.FAULTS_NAMED) == {rule.id for rule in (*doctor.SIGNATURES, *doctor.CHECKS)}
     assert set().union(*dc.FAULTS_NAMED.values()) <= set(FAULTS) | atlas_modes
     for fault, (_, _, cause, _) in FAULTS.items():
         assert fault in dc.FAULTS_NAMED[cause], fault
@@ -222,5 +222,6 @@ def test_the_committed_rule_table_is_the_codes():
     shows here."""
     rows = read_rows(dc.RULES_CSV)
     assert rows == dc.rule_rows(doctor.RULES)
+    assert [row["rule"] for row in rows if row["condition"] == "setting"] == [check.id for check in doctor.CHECKS]
     assert [row["rule"] for row in rows if row["condition"] == "first"] == [rule.id for rule in doctor.RULES]
     assert [row["rule"] for row in rows if row["condition"] == "also"] == [r.id for r in doctor.RULES if r.also]

@@ -15,6 +15,7 @@ from minippo.cli import main
 from minippo.doctor import RULES, diagnose, read_run, report
 from minippo.doctor_logs import SOURCES, read_log
 from minippo.errors import MinippoError
+from minippo.records import read_rows
 
 N_STEPS = 256  # environment steps an iteration, in the logs made here
 
@@ -58,12 +59,17 @@ def sb3_log(folder: Path, iterations: int, log_interval: int = 1, formats=("csv"
 
 
 def cleanrl_events(folder: Path, iterations: int, num_envs: int = 2, num_steps: int = 64, episode_every: int = 10,
-                   nan_explained_variance_at=(), extra_episodes: int = 0) -> list[tuple[int, float]]:  # fmt: skip
+                   nan_explained_variance_at=(), extra_episodes: int = 0,
+                   hyperparameters: dict | None = None) -> list[tuple[int, float]]:  # fmt: skip
     """``folder`` (runs/RUN_NAME) with the events CleanRL's ppo.py writes, by its own calls in its order
     (cleanrl/ppo.py lines 185-215 and 300-309): each env ends an episode every ``episode_every`` of its steps, with
-    return global_step / 100; update u's approx KL is kl_of(u). Returns the episodes as (global step, return)."""
+    return global_step / 100; update u's approx KL is kl_of(u). With ``hyperparameters`` (its Args as a dict), the
+    table it writes first (cleanrl/ppo.py line 170). Returns the episodes as (global step, return)."""
     tensorboard = pytest.importorskip("torch.utils.tensorboard", reason="needs torch and tensorboard")
     writer = tensorboard.SummaryWriter(str(folder))
+    if hyperparameters is not None:
+        rows = "\n".join([f"|{key}|{value}|" for key, value in hyperparameters.items()])
+        writer.add_text("hyperparameters", f"|param|value|\n|-|-|\n{rows}")
     global_step, episodes = 0, []
     for iteration in range(1, iterations + 1):
         for step in range(num_steps):
@@ -297,3 +303,93 @@ def test_the_report_of_a_partial_log_is_strict_json(tmp_path):
     text, status = report(run, as_json=True)
     parsed = json.loads(text, parse_constant=lambda name: pytest.fail(f"{name} in the JSON"))
     assert status == 0 and parsed["updates"] == 20 and parsed["notes"]
+
+
+# the run's settings, where the log carries them
+
+CLEANRL_ARGS = {"exp_name": "ppo", "seed": 1, "env_id": "CartPole-v1", "total_timesteps": 500000,
+                "learning_rate": 0.00025, "num_envs": 4, "num_steps": 128, "anneal_lr": True, "gamma": 0.99,
+                "gae_lambda": 0.95, "num_minibatches": 4, "update_epochs": 4, "norm_adv": True, "clip_coef": 0.2,
+                "clip_vloss": True, "ent_coef": 0.01, "vf_coef": 0.5, "max_grad_norm": 0.5,
+                "target_kl": None}  # fmt: skip
+
+
+def rl_zoo_config(folder: Path, hyperparameters: dict) -> None:
+    """config.yml as rl-zoo's ExperimentManager saves it: yaml.dump of an OrderedDict of the sorted hyperparameters."""
+    yaml = pytest.importorskip("yaml", reason="needs PyYAML (pip install 'minippo[doctor]')")
+    from collections import OrderedDict
+
+    with open(folder / "config.yml", "w") as handle:
+        yaml.dump(OrderedDict(sorted(hyperparameters.items())), handle)
+
+
+def test_cleanrls_hyperparameters_table_is_read_and_a_negative_entropy_coefficient_is_named_first(tmp_path, capsys):
+    pytest.importorskip("tensorboard", reason="needs the tensorboard package (pip install 'minippo[doctor]')")
+    run = tmp_path / "runs" / "CartPole-v1__ppo__1__1700000000"
+    cleanrl_events(run, iterations=20, hyperparameters=CLEANRL_ARGS | {"ent_coef": -0.05})
+    log = read_log(run)
+    assert log.settings == {"clip_epsilon": 0.2, "value_coef": 0.5, "entropy_coef": -0.05, "lr": 0.00025,
+                            "epochs": 4.0}  # fmt: skip
+    assert main(["doctor", str(run)]) == 1
+    out = capsys.readouterr().out
+    assert "1. setting entropy_coef = -0.05 (< 0 by definition" in out and "[entropy-bonus-negative]" in out
+    assert "#atlas-entropy" in out
+    text, status = report(run, as_json=True)
+    first = json.loads(text)["findings"][0]
+    assert (status, first["kind"], first["id"], first["value"]) == (1, "setting", "entropy-bonus-negative", -0.05)
+
+
+def test_a_healthy_cleanrl_run_is_checked_against_its_settings_and_passes(tmp_path, capsys):
+    pytest.importorskip("tensorboard", reason="needs the tensorboard package (pip install 'minippo[doctor]')")
+    run = tmp_path / "run"
+    cleanrl_events(run, iterations=20, hyperparameters=CLEANRL_ARGS)
+    assert main(["doctor", str(run)]) == 0
+    out = capsys.readouterr().out
+    assert "settings (" in out and "entropy_coef = 0.01 (bound: < 0)" in out and "clip_epsilon = 0.2" in out
+
+
+def test_rl_zoos_config_yml_beside_an_sb3_log_is_read_with_sb3s_defaults_for_what_it_leaves_out(tmp_path, capsys):
+    run = sb3_log(tmp_path / "sb3", iterations=20)
+    rl_zoo_config(run, {"clip_range": "lin_0.2", "learning_rate": "lin_0.001", "n_envs": 8, "n_epochs": 20,
+                        "vf_coef": 0.0, "policy": "MlpPolicy"})  # fmt: skip
+    log = read_log(run)
+    assert log.settings == {"clip_epsilon": 0.2, "value_coef": 0.0, "entropy_coef": 0.0, "lr": 0.001, "epochs": 20.0}
+    assert log.settings_file == str(run / "config.yml")
+    assert main(["doctor", str(run / "progress.csv")]) == 1  # the CSV file's path finds the config beside it too
+    assert "1. setting value_coef = 0 (<= 0 by definition" in capsys.readouterr().out
+
+
+def test_a_clip_range_of_1_or_more_is_out_of_bounds_and_a_minippo_config_is_read(tmp_path, capsys):
+    from minippo.config import Config
+
+    run = sb3_log(tmp_path / "sb3", iterations=20)
+    table = read_rows(run / "progress.csv")
+    rows = [{"update": i + 1, "step": 256 * (i + 1), "return_mean": 10 + i, "approx_kl": kl_of(i + 1),
+             "clip_fraction": 0.05, "entropy": 0.69 - 0.001 * i, "explained_variance": 0.5,
+             "value_loss": 20.0 - 0.1 * i} for i in range(len(table))]  # fmt: skip
+    minippo_run = tmp_path / "minippo"
+    minippo_run.mkdir()
+    with open(minippo_run / "progress.csv", "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    (minippo_run / "config.json").write_text(json.dumps(Config(env_id="CartPole-v1", clip_epsilon=1.0).to_dict()))
+    assert read_log(minippo_run).settings["clip_epsilon"] == 1.0
+    assert main(["doctor", str(minippo_run)]) == 1
+    assert "1. setting clip_epsilon = 1 (>= 1 by definition" in capsys.readouterr().out
+    (minippo_run / "config.json").write_text(json.dumps(Config(env_id="CartPole-v1", clip_epsilon=0.99).to_dict()))
+    assert "[clip-cannot-bind]" not in report(minippo_run)[0]
+
+
+def test_a_log_without_settings_says_so_and_a_config_it_cannot_read_is_a_note(tmp_path, capsys):
+    run = sb3_log(tmp_path / "sb3", iterations=20)
+    log = read_log(run)
+    assert log.settings == {} and log.settings_file is None
+    assert any("the run's settings are not in the log" in note and "config.yml" in note for note in log.notes)
+    assert main(["doctor", str(run)]) == 0  # the status is the rules': a log without settings is not a finding
+    pytest.importorskip("yaml", reason="needs PyYAML (pip install 'minippo[doctor]')")
+    (run / "config.yml").write_text("clip_range: [unclosed\n")
+    log = read_log(run)
+    assert log.settings == {} and any("cannot be read as rl-zoo's config.yml" in note for note in log.notes)
+    assert main(["doctor", str(run)]) == 0
+    assert "Traceback" not in capsys.readouterr().err
