@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from benchmarks import doctor_calibrate as dc
+from benchmarks import doctor_confusion
 from minippo import doctor
 from minippo.records import read_rows, write_rows
 from minippo.run_folder import PROGRESS_FIELDS
@@ -190,20 +191,33 @@ def test_evaluate_counts_false_alarms_recall_and_the_right_cause_first(tmp_path)
         "kl-spike": {"threshold": 0.1, "healthy": [0.001, 0.01]},
         "critic-worse-than-constant": {"threshold": -1.0, "healthy": [0.0, 1.0]}}}  # fmt: skip
     (tmp_path / "thresholds.json").write_text(json.dumps(table))
-    text = dc.evaluate("calibration", folder, record, manifest, tmp_path / "thresholds.json", tmp_path / "out.csv")
+    from minippo.config import Config
+
+    vf_0 = folder / "minippo-defaults-CartPole-v1-vf_0-1x-seed4"  # its settings in the log: the check names it
+    (vf_0 / "config.json").write_text(json.dumps(Config(env_id="CartPole-v1", value_coef=0.0).to_dict()))
+    text = doctor_confusion.evaluate("calibration", folder, record, manifest, tmp_path / "thresholds.json",
+                                     tmp_path / "out.csv")
     with open(tmp_path / "out.csv", newline="") as handle:
         rows = {(row["kind"], row["name"]): row for row in csv.DictReader(handle)}
-    overall = rows["overall", "all runs"]
-    assert (overall["healthy_runs"], overall["false_alarms"], overall["broken_runs"], overall["flagged"],
-            overall["first_right"], overall["first_rule_expected"]) == ("2", "1", "3", "2", "1", "1")  # fmt: skip
+    def overall(name):
+        row = rows["overall", name]
+        return tuple(row[key] for key in ("healthy_runs", "false_alarms", "broken_runs", "flagged", "first_right",
+                                          "first_rule_expected"))  # fmt: skip
+
+    assert overall("all runs, rules only") == ("2", "1", "3", "2", "1", "1")
+    assert overall("all runs") == ("2", "1", "3", "3", "2", "1")  # vf_0 by its setting, not the manifest's rule
+    assert (rows["check", "critic-not-trained"]["flagged"], rows["check", "critic-not-trained"]["false_alarms"]) == (
+        "1", "0")
+    assert (rows["fault", "vf_0"]["flagged"], rows["fault, rules only", "vf_0"]["flagged"]) == ("1", "0")
     assert (rows["rule", "kl-spike"]["false_alarms"], rows["rule", "kl-spike"]["broken_runs"]) == ("1", "0")
     assert (rows["rule", "no-clip"]["flagged"], rows["rule", "no-clip"]["broken_runs"]) == ("1", "2")
     assert (rows["fault", "clip_10"]["flagged"], rows["fault", "clip_10"]["first_right"]) == ("2", "1")
     assert rows["rule", "critic-worse-than-constant"]["flagged"] == "0"
-    assert "| healthy runs flagged (false alarms) | 1/2 (50%) |" in text
-    assert "| the right cause named first | 1/3 (33%) |" in text
-    assert dc.verdicts_path(tmp_path / "out.csv").exists()
-    assert dc.verdicts_path(dc.common.RESULTS / "doctor_confusion_held-out.csv").name == "doctor_verdicts_held-out.csv"
+    assert "| healthy runs flagged (false alarms) | 1/2 (50%) | 1/2 (50%) |" in text
+    assert "| the right cause named first | 2/3 (67%) | 1/3 (33%) |" in text
+    assert doctor_confusion.verdicts_path(tmp_path / "out.csv").exists()
+    held_out = doctor_confusion.verdicts_path(dc.common.RESULTS / "doctor_confusion_held-out.csv")
+    assert held_out.name == "doctor_verdicts_held-out.csv"
 
 
 def test_each_rule_names_faults_that_exist_and_each_campaign_fault_is_named_by_the_rule_it_expects():

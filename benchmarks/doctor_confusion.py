@@ -1,0 +1,108 @@
+"""The doctor's confusion table on one part of its campaign: ``python -m benchmarks.doctor_calibrate evaluate --part
+PART`` runs ``minippo doctor``, with the thresholds of minippo/doctor_thresholds.json, on every recorded run of the part
+(benchmarks/doctor_calibrate.py reads them, opening no folder of another part), and writes per rule its false alarms
+on healthy runs and its recall on the broken runs of the faults it names, and overall the healthy runs flagged, the
+broken runs flagged, and those whose first finding names their fault among its causes; each once with the checks of
+the settings the logs carry and once with the rules alone.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from benchmarks import common
+from benchmarks.doctor_calibrate import FAULTS_NAMED, common_markdown, read_part
+from minippo import doctor
+
+
+def names_fault(rule_id: str, fault: str) -> bool:
+    return fault in FAULTS_NAMED.get(rule_id, ())
+
+
+def verdicts_path(out_csv: Path) -> Path:
+    """Where evaluate writes each run's findings: beside the confusion table, doctor_verdicts_PART.csv."""
+    stem = out_csv.stem
+    return out_csv.with_name((stem.replace("confusion", "verdicts") if "confusion" in stem else stem + "_verdicts")
+                             + ".csv")  # fmt: skip
+
+
+def _overall(name: str, healthy: list, broken: list, verdicts: dict) -> dict:
+    return {"kind": "overall", "name": name, "healthy_runs": len(healthy),
+            "false_alarms": sum(bool(verdicts[run.id]) for run in healthy), "broken_runs": len(broken),
+            "flagged": sum(bool(verdicts[run.id]) for run in broken),
+            "first_right": sum(bool(verdicts[run.id]) and names_fault(verdicts[run.id][0], run.fault)
+                               for run in broken),
+            "first_rule_expected": sum(verdicts[run.id][:1] == [run.cause] for run in broken)}  # fmt: skip
+
+
+def evaluate(part: str, runs_dir: Path, record_json: Path | None, manifest_csv: Path, thresholds_json: Path,
+             out_csv: Path) -> str:  # fmt: skip
+    """The doctor on every recorded run of ``part``: the checks of the settings its log carries, then the rules; and
+    again with the rules alone (what the doctor makes of a log without settings)."""
+    table = doctor.load_thresholds(thresholds_json)
+    rules = doctor.calibrated(doctor.SIGNATURES, table)
+    runs, left_out = read_part(part, runs_dir, manifest_csv, record_json)
+    verdicts = {run.id: [f.rule.id for f in doctor.diagnose(run.rows, rules, run.settings)] for run in runs}
+    logs_only = {run.id: [f.rule.id for f in doctor.diagnose(run.rows, rules, checks=())] for run in runs}
+    healthy = [run for run in runs if run.healthy]
+    broken = [run for run in runs if not run.healthy]
+    rows = []
+    for rule in (*doctor.CHECKS, *rules):
+        mine = [run for run in broken if names_fault(rule.id, run.fault)]
+        alarms = sum(rule.id in verdicts[run.id] for run in healthy)
+        caught = sum(rule.id in verdicts[run.id] for run in mine)
+        rows.append({"kind": "check" if isinstance(rule, doctor.Check) else "rule", "name": rule.id,
+                     "healthy_runs": len(healthy), "false_alarms": alarms, "broken_runs": len(mine), "flagged": caught,
+                     "first_right": sum(verdicts[run.id][:1] == [rule.id] for run in mine)})  # fmt: skip
+    for fault in dict.fromkeys(run.fault for run in broken):
+        mine = [run for run in broken if run.fault == fault]
+        for kind, found in (("fault", verdicts), ("fault, rules only", logs_only)):
+            rows.append({"kind": kind, "name": fault, "broken_runs": len(mine),
+                         "flagged": sum(bool(found[run.id]) for run in mine),
+                         "first_right": sum(bool(found[run.id]) and names_fault(found[run.id][0], fault)
+                                            for run in mine),
+                         "first_rule_expected": sum(found[run.id][:1] == [run.cause] for run in mine)})  # fmt: skip
+    rows.append(_overall("all runs", healthy, broken, verdicts))
+    rows.append(_overall("all runs, rules only", healthy, broken, logs_only))
+    fields = ["kind", "name", "healthy_runs", "false_alarms", "broken_runs", "flagged", "first_right",
+              "first_rule_expected"]  # fmt: skip
+    common.write_rows(out_csv, rows, fields)
+    per_run = [{"id": run.id, "library": run.library, "task": run.task, "fault": run.fault, "updates": len(run.rows),
+                "settings": "yes" if run.settings else "no", "findings": " ".join(verdicts[run.id]) or "none",
+                "rules_only": " ".join(logs_only[run.id]) or "none"} for run in runs]  # fmt: skip
+    common.write_rows(verdicts_path(out_csv), per_run)
+    return confusion_markdown(part, rows, left_out, table)
+
+
+def _share(count: int, total: int) -> str:
+    return f"{count}/{total}" + (f" ({count / total:.0%})" if total else "")
+
+
+def confusion_markdown(part: str, rows: list[dict], left_out: dict, table: dict) -> str:
+    by_rule = [[f"`{r['name']}`" + " (setting)" * (r["kind"] == "check"), _share(r["false_alarms"], r["healthy_runs"]),
+                _share(r["flagged"], r["broken_runs"]), str(r["first_right"])]
+               for r in rows if r["kind"] in ("check", "rule")]  # fmt: skip
+    alone = {r["name"]: r for r in rows if r["kind"] == "fault, rules only"}
+    by_fault = [[f"`{r['name']}`", _share(r["flagged"], r["broken_runs"]), _share(r["first_right"], r["broken_runs"]),
+                 _share(alone[r["name"]]["flagged"], r["broken_runs"]),
+                 _share(alone[r["name"]]["first_right"], r["broken_runs"])] for r in rows if r["kind"] == "fault"]
+    total, rules_only = (next(r for r in rows if r["name"] == name) for name in ("all runs", "all runs, rules only"))
+    skipped = ", ".join(f"{n} {why}" for why, n in left_out.items())
+
+    def measures(r):
+        return [_share(r["false_alarms"], r["healthy_runs"]), _share(r["flagged"], r["broken_runs"]),
+                _share(r["first_right"], r["broken_runs"]), _share(r["first_rule_expected"], r["broken_runs"])]
+
+    return "\n\n".join([
+        f"{part}: {total['healthy_runs']} healthy and {total['broken_runs']} broken runs"
+        + (f" ({skipped}, left out)" if skipped else "")
+        + f"; thresholds of {table.get('date', '?')}, commit {table.get('commit', '?')}",
+        common_markdown(["rule", "false alarms (healthy runs)", "recall (runs of the faults it names)",
+                         "named first"], by_rule),
+        common_markdown(["fault", "flagged", "right cause first", "flagged, rules only",
+                         "right cause first, rules only"], by_fault),
+        common_markdown(["measure", "with the settings checks", "rules only"], [
+            [name, *pair] for name, *pair in zip(
+                ["healthy runs flagged (false alarms)", "broken runs flagged", "the right cause named first",
+                 "the manifest's rule named first"], measures(total), measures(rules_only))]),
+    ])  # fmt: skip
