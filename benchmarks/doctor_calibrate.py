@@ -102,6 +102,8 @@ class Run:
     cause: str  # the rule the manifest expects first ("" for healthy runs and the atlas)
     rows: list
     settings: dict = field(default_factory=dict)  # the settings its log carries (doctor_logs.SETTINGS)
+    preset: str = ""  # the manifest's settings (defaults, zoo, ...) and length (1x, 4x)
+    length: str = ""
 
     @property
     def healthy(self) -> bool:
@@ -145,7 +147,8 @@ def read_part(part: str, runs_dir: Path, manifest_csv: Path = MANIFEST_CSV, reco
             left_out["under 10 updates"] = left_out.get("under 10 updates", 0) + 1
             continue
         runs.append(Run(entry["id"], "campaign", entry["part"], entry["library"], entry["task"], entry["fault"],
-                        entry["cause"], rows, settings))  # fmt: skip
+                        entry["cause"], rows, settings, entry.get("settings", ""),
+                        entry.get("length", "")))  # fmt: skip
     return runs, left_out
 
 

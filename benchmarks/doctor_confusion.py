@@ -8,7 +8,10 @@ the settings the logs carry and once with the rules alone.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
+
+import numpy as np
 
 from benchmarks import common
 from benchmarks.doctor_calibrate import FAULTS_NAMED, common_markdown, read_part
@@ -26,13 +29,32 @@ def verdicts_path(out_csv: Path) -> Path:
                              + ".csv")  # fmt: skip
 
 
-def _overall(name: str, healthy: list, broken: list, verdicts: dict) -> dict:
+def final_return(run) -> float:
+    """Where the run ended up: the median logged return over its last quarter of updates."""
+    returns = np.array([row.get("return_mean", math.nan) for row in run.rows], dtype=float)
+    returns = returns[np.isfinite(returns)]
+    return float(np.median(returns[-max(1, len(returns) // 4) :])) if len(returns) else math.nan
+
+
+def harmed(run, runs) -> str:
+    """Whether a broken run's fault cost it return: "yes" when it ended below every healthy run of its library,
+    settings, task and length in the part, "no" when it did not, "n/a" when there is no such healthy run or the logged
+    return is not the task's (a zeroed reward logs the zeroed return)."""
+    peers = [final_return(other) for other in runs if other.healthy and (other.library, other.preset, other.task,
+             other.length) == (run.library, run.preset, run.task, run.length)]  # fmt: skip
+    if run.fault == "reward_zero" or not peers:
+        return "n/a"
+    return "yes" if final_return(run) < min(peers) else "no"
+
+
+def _overall(name: str, healthy: list, broken: list, verdicts: dict, harm: dict) -> dict:
     return {"kind": "overall", "name": name, "healthy_runs": len(healthy),
             "false_alarms": sum(bool(verdicts[run.id]) for run in healthy), "broken_runs": len(broken),
             "flagged": sum(bool(verdicts[run.id]) for run in broken),
             "first_right": sum(bool(verdicts[run.id]) and names_fault(verdicts[run.id][0], run.fault)
                                for run in broken),
-            "first_rule_expected": sum(verdicts[run.id][:1] == [run.cause] for run in broken)}  # fmt: skip
+            "first_rule_expected": sum(verdicts[run.id][:1] == [run.cause] for run in broken),
+            "unharmed_missed": sum(not verdicts[run.id] and harm[run.id] == "no" for run in broken)}  # fmt: skip
 
 
 def evaluate(part: str, runs_dir: Path, record_json: Path | None, manifest_csv: Path, thresholds_json: Path,
@@ -46,6 +68,7 @@ def evaluate(part: str, runs_dir: Path, record_json: Path | None, manifest_csv: 
     logs_only = {run.id: [f.rule.id for f in doctor.diagnose(run.rows, rules, checks=())] for run in runs}
     healthy = [run for run in runs if run.healthy]
     broken = [run for run in runs if not run.healthy]
+    harm = {run.id: harmed(run, runs) for run in broken}
     rows = []
     for rule in (*doctor.CHECKS, *rules):
         mine = [run for run in broken if names_fault(rule.id, run.fault)]
@@ -58,17 +81,19 @@ def evaluate(part: str, runs_dir: Path, record_json: Path | None, manifest_csv: 
         mine = [run for run in broken if run.fault == fault]
         for kind, found in (("fault", verdicts), ("fault, rules only", logs_only)):
             rows.append({"kind": kind, "name": fault, "broken_runs": len(mine),
+                         "unharmed_missed": sum(not found[run.id] and harm[run.id] == "no" for run in mine),
                          "flagged": sum(bool(found[run.id]) for run in mine),
                          "first_right": sum(bool(found[run.id]) and names_fault(found[run.id][0], fault)
                                             for run in mine),
                          "first_rule_expected": sum(found[run.id][:1] == [run.cause] for run in mine)})  # fmt: skip
-    rows.append(_overall("all runs", healthy, broken, verdicts))
-    rows.append(_overall("all runs, rules only", healthy, broken, logs_only))
+    rows.append(_overall("all runs", healthy, broken, verdicts, harm))
+    rows.append(_overall("all runs, rules only", healthy, broken, logs_only, harm))
     fields = ["kind", "name", "healthy_runs", "false_alarms", "broken_runs", "flagged", "first_right",
-              "first_rule_expected"]  # fmt: skip
+              "first_rule_expected", "unharmed_missed"]  # fmt: skip
     common.write_rows(out_csv, rows, fields)
     per_run = [{"id": run.id, "library": run.library, "task": run.task, "fault": run.fault, "updates": len(run.rows),
-                "settings": "yes" if run.settings else "no", "findings": " ".join(verdicts[run.id]) or "none",
+                "settings": "yes" if run.settings else "no", "final_return": f"{final_return(run):.4g}",
+                "harmed": harm.get(run.id, ""), "findings": " ".join(verdicts[run.id]) or "none",
                 "rules_only": " ".join(logs_only[run.id]) or "none"} for run in runs]  # fmt: skip
     common.write_rows(verdicts_path(out_csv), per_run)
     return confusion_markdown(part, rows, left_out, table)
@@ -85,13 +110,15 @@ def confusion_markdown(part: str, rows: list[dict], left_out: dict, table: dict)
     alone = {r["name"]: r for r in rows if r["kind"] == "fault, rules only"}
     by_fault = [[f"`{r['name']}`", _share(r["flagged"], r["broken_runs"]), _share(r["first_right"], r["broken_runs"]),
                  _share(alone[r["name"]]["flagged"], r["broken_runs"]),
-                 _share(alone[r["name"]]["first_right"], r["broken_runs"])] for r in rows if r["kind"] == "fault"]
+                 _share(alone[r["name"]]["first_right"], r["broken_runs"]), str(alone[r["name"]]["unharmed_missed"])]
+                for r in rows if r["kind"] == "fault"]  # fmt: skip
     total, rules_only = (next(r for r in rows if r["name"] == name) for name in ("all runs", "all runs, rules only"))
     skipped = ", ".join(f"{n} {why}" for why, n in left_out.items())
 
     def measures(r):
         return [_share(r["false_alarms"], r["healthy_runs"]), _share(r["flagged"], r["broken_runs"]),
-                _share(r["first_right"], r["broken_runs"]), _share(r["first_rule_expected"], r["broken_runs"])]
+                _share(r["first_right"], r["broken_runs"]), _share(r["first_rule_expected"], r["broken_runs"]),
+                str(r["unharmed_missed"])]
 
     return "\n\n".join([
         f"{part}: {total['healthy_runs']} healthy and {total['broken_runs']} broken runs"
@@ -100,9 +127,11 @@ def confusion_markdown(part: str, rows: list[dict], left_out: dict, table: dict)
         common_markdown(["rule", "false alarms (healthy runs)", "recall (runs of the faults it names)",
                          "named first"], by_rule),
         common_markdown(["fault", "flagged", "right cause first", "flagged, rules only",
-                         "right cause first, rules only"], by_fault),
+                         "right cause first, rules only", "missed by the rules, return no worse than healthy"],
+                        by_fault),
         common_markdown(["measure", "with the settings checks", "rules only"], [
             [name, *pair] for name, *pair in zip(
                 ["healthy runs flagged (false alarms)", "broken runs flagged", "the right cause named first",
-                 "the manifest's rule named first"], measures(total), measures(rules_only))]),
+                 "the manifest's rule named first", "broken runs missed whose return is no worse than healthy"],
+                measures(total), measures(rules_only))]),
     ])  # fmt: skip

@@ -239,3 +239,17 @@ def test_the_committed_rule_table_is_the_codes():
     assert [row["rule"] for row in rows if row["condition"] == "setting"] == [check.id for check in doctor.CHECKS]
     assert [row["rule"] for row in rows if row["condition"] == "first"] == [rule.id for rule in doctor.RULES]
     assert [row["rule"] for row in rows if row["condition"] == "also"] == [r.id for r in doctor.RULES if r.also]
+
+
+def test_a_broken_run_is_harmed_when_it_ends_below_every_healthy_run_of_its_setting():
+    def run(fault, last, library="sb3", task="Acrobot-v1", length="1x"):
+        rows = [{"update": u, "return_mean": -500.0 + (last + 500.0) * min(u / 20, 1.0)} for u in range(40)]
+        return dc.Run(f"{fault}-{last}", "campaign", "held-out", library, task, fault, "", rows, {}, "defaults", length)
+
+    healthy = [run("healthy", -90.0), run("healthy", -80.0), run("healthy", -300.0, task="Pendulum-v1"),
+               run("healthy", -400.0, length="4x")]  # fmt: skip
+    assert doctor_confusion.final_return(healthy[0]) == -90.0  # the median of the last quarter, not the start
+    below, within, zeroed = run("vf_0", -200.0), run("lr_x10", -85.0), run("reward_zero", 0.0)
+    runs = healthy + [below, within, zeroed]
+    assert [doctor_confusion.harmed(r, runs) for r in (below, within, zeroed)] == ["yes", "no", "n/a"]
+    assert doctor_confusion.harmed(run("vf_0", -200.0, library="cleanrl"), runs) == "n/a"  # no healthy run to compare
