@@ -84,7 +84,7 @@ FAULTS_NAMED = {
     "kl-spike": STEP_SIZE,
     "kl-high": STEP_SIZE,
     "clip-high": STEP_SIZE,
-    "entropy-collapse": ("ent_-0.01", "ent_-0.05", "entropy_wrong_sign"),
+    "entropy-collapse": ("ent_-0.01", "ent_-0.05", "entropy_wrong_sign") + STEP_SIZE,
     "policy-barely-moves": ("minibatch_whole",),
     "critic-worse-than-constant": ("vf_0", "value_loss_sign", "stale_value_targets"),
     "value-loss-grows": ("value_loss_sign", "no_reward_scaling", "gamma_1"),

@@ -230,9 +230,12 @@ SIGNATURES = (
          ("too many epochs K over one batch", "a step size α too large", "minibatches far too small"),
          "atlas-step-size", (math.nan, math.nan)),
     # the entropy falling to a small share of its start (a Gaussian's may cross 0: a negative share) while the return
-    # does not rise: the policy turned certain without learning
+    # does not rise: the policy turned certain without learning. A bonus of the wrong sign pushes it there; so can
+    # steps so large that one update makes the policy all but deterministic (the atlas's collapsed CartPole seed)
     Rule("entropy-collapse", "entropy", "all updates", "last quarter over first", "<", math.nan,
-         ("an entropy coefficient with the wrong sign (c2 < 0): the bonus pushes the policy towards certainty",),
+         ("an entropy coefficient with the wrong sign (c2 < 0): the bonus pushes the policy towards certainty",
+          "steps far too large (α, K): an update that made the policy all but deterministic, after which it learns "
+          "nothing"),
          "atlas-entropy", (math.nan, math.nan),
          also=Condition("return_mean", "all updates", "change from first", "<")),
     # the largest approx KL at the other end: the whole batch as one minibatch (one Adam step an epoch)
