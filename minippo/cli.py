@@ -245,7 +245,7 @@ def cmd_grade(args) -> int:
 def cmd_doctor(args) -> int:
     from minippo.doctor import report
 
-    text, status = report(args.run, as_json=args.json)
+    text, status = report(args.run, as_json=args.json, settings=args.settings)
     print(text)
     return status
 
@@ -345,13 +345,18 @@ def build_parser() -> Parser:
         help="name the failure signatures in a run's log",
         description="Read a run's log (minippo's or Stable-Baselines3's progress.csv, SB3's or CleanRL's TensorBoard "
         "event files, or W&B's CSV export of either) and report each failure signature its debug variables show: what "
-        "was seen against the healthy range, the likely causes in order, and the section of the book to read. A rule "
-        "whose data the log lacks is reported as not checked. Exit status: 0 when every rule was checked and none "
-        "holds, 1 when one holds, 2 on bad input, 3 when none holds but some rules could not be checked.",
+        "was seen against the healthy range, the likely causes in order, and the section of the book to read; where "
+        "the log carries the run's settings, or --settings names them, three are first checked against bounds that "
+        "PPO's objective sets. A rule whose data the log lacks is reported as not checked. Exit status: 0 when every "
+        "rule was checked and none holds, 1 when one holds (or a setting is out of bounds), 2 on bad input, 3 when "
+        "none holds but some rules could not be checked.",
     )
     p.add_argument("run", help="a run folder (holding progress.csv or one run's TensorBoard event files), a CSV file "
                    "or an events file")  # fmt: skip
     p.add_argument("--json", action="store_true", help='the report as JSON, and an error as {"error": ...}')
+    p.add_argument("--settings", metavar="FILE", help="the run's settings, when its log does not carry them: a JSON "
+                   "or YAML table in the log's library's names (minippo's config.json, rl-zoo's config.yml, CleanRL's "
+                   "arguments)")  # fmt: skip
     p.set_defaults(func=cmd_doctor)
     return parser
 

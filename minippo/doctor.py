@@ -4,10 +4,11 @@ Reads minippo's progress.csv, Stable-Baselines3's CSV or TensorBoard log, CleanR
 export of either; minippo/doctor_logs.py reads them, and its SOURCES table maps each one's columns to minippo's names
 and units. A rule whose variable the log lacks (or has on too few updates) is reported as not checked, not as clean.
 
-Where the log carries the run's settings (minippo's config.json, rl-zoo's config.yml beside an SB3 log, CleanRL's
-hyperparameters table), the doctor first checks them (CHECKS) against bounds that PPO's objective sets by definition:
-an entropy coefficient below 0, a value coefficient of 0 or below, a clip range of 1 or more. These bounds are not
-calibrated: no healthy run can cross them.
+Where the log carries the run's settings (minippo's config.json, a config.yml in rl-zoo's format beside an SB3 log,
+CleanRL's hyperparameters table; or a file named with --settings), the doctor first checks them (CHECKS) against bounds
+that PPO's objective sets by definition: an entropy coefficient below 0, a value coefficient of 0 or below, a clip
+range of 1 or more. These bounds are not calibrated on runs: beyond them a term of eq. 9 does the opposite of what it
+is there for, or nothing, whether or not the run still learns.
 
 Each rule compares a statistic of a variable over a window with a threshold; a relative signature adds a second
 condition on another variable. The thresholds and the healthy ranges shown beside them are not written here: they are
@@ -15,8 +16,8 @@ in minippo/doctor_thresholds.json, which ``python -m benchmarks.doctor_calibrate
 runs only (runs of minippo, Stable-Baselines3 and CleanRL, healthy and broken, and the atlas's record).
 
 Exit status: 0 when every rule was checked and none holds, 1 when a rule or a check of the settings holds, 2 on bad
-input, 3 when none holds but some rules could not be checked. A log without settings says so in a note; it does not
-change the status.
+input (a log under MIN_UPDATES updates among it, whatever its settings), 3 when none holds but some rules could not be
+checked. A log without settings says so in a note; it does not change the status.
 """
 
 from __future__ import annotations
@@ -281,11 +282,13 @@ CHECKS = (
           "atlas-entropy"),
     Check("critic-not-trained", "value_coef", "<=", 0.0,
           "with c1 ≤ 0 the value loss of eq. 9 gives the critic no gradient (c1 = 0) or one that climbs its error",
-          ("the value loss weighted 0 (c1 = 0): the critic is never trained, and the advantages use its first guess",),
+          ("the value loss weighted 0 (c1 = 0): the value loss never trains the critic, so the advantages rest on "
+           "values it never fitted",),
           "atlas-value-loss"),
     Check("clip-cannot-bind", "clip_epsilon", ">=", 1.0,
-          "with ε ≥ 1 the lower clip 1 − ε ≤ 0 is never reached (a ratio is positive), and 1 + ε seldom is",
-          ("the clip range ε far too large: no ratio reaches 1 ± ε, so nothing holds the update near θ_old",),
+          "with ε ≥ 1 the lower clip 1 − ε ≤ 0 is never reached (a ratio is positive): nothing holds r_t down where "
+          "Â_t < 0",
+          ("the clip range ε far too large: the clip no longer holds the update near θ_old",),
           "atlas-clip"),
 )  # fmt: skip
 
@@ -391,11 +394,11 @@ def _finite(value: float) -> float | None:
     return value if math.isfinite(value) else None  # strict JSON has no NaN
 
 
-def report(path, as_json: bool = False) -> tuple[str, int]:
+def report(path, as_json: bool = False, settings=None) -> tuple[str, int]:
     """The doctor's report of the run at ``path`` and its exit status: 0 when every rule was checked and none holds, 1
     when a rule or a check of the settings holds, 3 when none holds but some rules could not be checked (their data
-    is missing)."""
-    log = read_log(path)
+    is missing). ``settings``: a file of the run's settings, when the log does not carry them."""
+    log = read_log(path, settings)
     rows = log.rows
     settings_found = check_settings(log.settings, CHECKS, log.settings_file or "")
     findings = settings_found + diagnose(rows, RULES, checks=())
@@ -422,6 +425,9 @@ def report(path, as_json: bool = False) -> tuple[str, int]:
                                        + [described(f.rule, f.value, f.first_update, f.last_update, f.also_value)
                                           for f in findings[len(settings_found):]],
                            "checked": [described(*m) for m in measured],
+                           "settings_checked": [{"id": check.id, "setting": check.setting,
+                                                 "value": log.settings.get(check.setting),
+                                                 "found": check.holds(log.settings)} for check in CHECKS],
                            "not_checked": [rule.id for rule in RULES if missing[rule.id]]},
                           indent=1, allow_nan=False)  # fmt: skip
         return text, status
@@ -429,6 +435,10 @@ def report(path, as_json: bool = False) -> tuple[str, int]:
     if log.source in UNITS:
         head += f" ({UNITS[log.source]})"
     lines = [head, *(f"  note: {note}" for note in log.notes)]
+    if log.settings:
+        lines += [f"  settings ({log.settings_file}): " + ", ".join(
+            f"{check.setting} = {log.settings[check.setting]:.4g} (bound: {check.comparison} {check.bound:g})"
+            for check in CHECKS if check.setting in log.settings)]  # fmt: skip
     checked = [m for m in measured if not missing[m[0].id]]
     if findings:
         signatures = len(findings) - len(settings_found)
@@ -442,10 +452,6 @@ def report(path, as_json: bool = False) -> tuple[str, int]:
         by = f"by the {len(checked)} rules of {len(RULES)} that could be checked " if len(checked) < len(RULES) else ""
         lines += [f"no failure signature found {by}in {len(rows)} updates; what was checked, against the healthy "
                   f"ranges ({CHAPTER}#atlas-healthy):"]  # fmt: skip
-        if log.settings_file:
-            lines += [f"  settings ({log.settings_file}): " + ", ".join(
-                f"{check.setting} = {log.settings[check.setting]:.4g} (bound: {check.comparison} {check.bound:g})"
-                for check in CHECKS if check.setting in log.settings)]  # fmt: skip
         for rule, value, first, last, also_value in checked:
             line = (f"  {rule.condition.describe()} over updates {first}-{last} = {value:.4g} (flagged "
                     f"{rule.comparison} {rule.threshold:.4g}; healthy runs: {_range(rule.healthy)})")

@@ -8,9 +8,11 @@ A run is a CSV file, a TensorBoard events file, or a folder holding progress.csv
 - CleanRL's ``ppo.py`` and ``ppo_continuous_action.py``: their TensorBoard events (runs/RUN_NAME/);
 - W&B's CSV export of a run of either (its history: the tags as columns, and ``global_step`` or ``_step``).
 
-Where the log carries the run's settings, they are read too (SETTINGS): minippo's config.json beside its progress.csv,
-the config.yml that rl-zoo saves beside an SB3 log (SB3's PPO defaults for what it leaves out), and the hyperparameters
-table CleanRL writes to its events file. A W&B export keeps its run's config apart and is read without settings.
+The run's settings are read too (SETTINGS) where the log carries them: minippo's config.json beside its progress.csv,
+a config.yml in rl-zoo's format (an OrderedDict dumped by PyYAML) beside an SB3 log or in a folder above it up to the
+path given (SB3's PPO defaults for what it leaves out), and the hyperparameters table CleanRL writes to its events
+file. rl-zoo itself saves its config.yml apart from the logs (in <algo>/<env>_<n>/<env>/), and a W&B export keeps its
+run's config apart: ``minippo doctor RUN --settings FILE`` names the file.
 
 SOURCES holds each source's columns or tags, the factor that turns a value into minippo's units, and when it is
 logged. What differs beyond the factor (minippo's debug variables are over the whole batch after the update):
@@ -118,7 +120,7 @@ SETTINGS = {
     "epochs": {"minippo": "epochs", "sb3": "n_epochs", "cleanrl": "update_epochs"},
 }
 SB3_DEFAULTS = {"clip_range": 0.2, "vf_coef": 0.5, "ent_coef": 0.0, "learning_rate": 3e-4, "n_epochs": 10}
-SB3_CONFIG = "config.yml"  # rl-zoo's ExperimentManager saves the hyperparameters of a run under this name
+SB3_CONFIG = "config.yml"  # the name rl-zoo's ExperimentManager saves a run's hyperparameters under
 CLEANRL_HYPERPARAMETERS = "hyperparameters/text_summary"  # writer.add_text("hyperparameters", a markdown table)
 SB3_ITERATIONS, SB3_STEPS = "time/iterations", "time/total_timesteps"  # in SB3's CSV only
 READS = ("minippo's or Stable-Baselines3's progress.csv, a W&B CSV export of an SB3 or CleanRL run (a CSV file: give "
@@ -247,7 +249,8 @@ def _read_events(path: Path) -> Log:
     scalars = {tag: [(event.step, event.value) for event in accumulator.Scalars(tag)] for tag in tags}
     log = _from_scalars(path, source, "TensorBoard events", scalars, [], tags)
     if source == "cleanrl" and (named := _cleanrl_hyperparameters(accumulator)):
-        log.settings, log.settings_file = _named_settings("cleanrl", named), f"{path}: {CLEANRL_HYPERPARAMETERS}"
+        where = f"{path}: {CLEANRL_HYPERPARAMETERS}"
+        log.settings, log.settings_file = _named_settings("cleanrl", named, where, log.notes), where
     return log
 
 
@@ -348,36 +351,41 @@ def _finished(log: Log, names) -> Log:
 
 
 def _setting(value) -> float | None:
-    """A setting as a number: rl-zoo's "lin_X" (a schedule falling linearly from X) as X; None when it is not one."""
+    """A setting as a finite number: rl-zoo's "lin_X" (a schedule falling linearly from X) as X; None when it is not
+    one (a word, a boolean, a table, NaN or infinity)."""
+    if isinstance(value, bool):
+        return None
     if isinstance(value, str) and value.strip().startswith("lin_"):
         value = value.strip()[4:]
     try:
-        return float(value)
-    except (TypeError, ValueError):
+        number = float(value)
+    except (TypeError, ValueError, OverflowError):
         return None
+    return number if math.isfinite(number) else None
 
 
-def _named_settings(source: str, named: dict) -> dict:
-    """The SETTINGS that ``named`` (the source's names: values) holds, in minippo's names."""
-    values = {name: _setting(named.get(names[source])) for name, names in SETTINGS.items()}
-    return {name: value for name, value in values.items() if value is not None}
+def _named_settings(source: str, named: dict, where: str, notes: list) -> dict:
+    """The SETTINGS that ``named`` (the source's names: values) holds, in minippo's names; what it holds that is not a
+    finite number is said in ``notes``."""
+    settings = {}
+    for name, names in SETTINGS.items():
+        if names[source] not in named:
+            continue
+        value = _setting(named[names[source]])
+        if value is None:
+            notes.append(f"{where}: {names[source]} = {named[names[source]]!r} is not a number: not checked")
+        else:
+            settings[name] = value
+    return settings
 
 
-def _sb3_config(file: Path, top: Path, notes: list) -> tuple[dict, str | None]:
-    """The settings in the config.yml nearest the log ``file`` (its folder, then each folder up to ``top``)."""
-    folder = file.parent
-    while True:
-        config = folder / SB3_CONFIG
-        if config.is_file():
-            break
-        if folder == top or folder == folder.parent or top not in folder.parents:
-            return {}, None
-        folder = folder.parent
+def _yaml_table(config: Path, notes: list) -> dict | None:
+    """The mapping in a YAML file such as rl-zoo's config.yml (an OrderedDict dumped by PyYAML), or None (a note)."""
     try:
         import yaml
     except ImportError:
         notes.append(f"{config}: reading it needs the PyYAML package (pip install 'minippo[doctor]'): no settings read")
-        return {}, None
+        return None
 
     class Loader(yaml.SafeLoader):  # rl-zoo dumps an OrderedDict: a python/object/apply tag over a list of pairs
         pass
@@ -389,50 +397,91 @@ def _sb3_config(file: Path, top: Path, notes: list) -> tuple[dict, str | None]:
     try:
         named = yaml.load(config.read_text(encoding="utf-8"), Loader=Loader)  # noqa: S506 (a SafeLoader)
     except (yaml.YAMLError, UnicodeDecodeError, ValueError, TypeError, IndexError) as error:
-        notes.append(f"{config} cannot be read as rl-zoo's config.yml ({str(error).splitlines()[0]}): no settings read")
-        return {}, None
+        notes.append(f"{config} cannot be read as YAML ({str(error).splitlines()[0]}): no settings read")
+        return None
     if not isinstance(named, dict):
         notes.append(f"{config} holds no table of hyperparameters: no settings read")
-        return {}, None
-    return _named_settings("sb3", SB3_DEFAULTS | named), str(config)
+        return None
+    return named
+
+
+def _json_table(config: Path, notes: list) -> dict | None:
+    try:
+        named = json.loads(config.read_text(encoding="utf-8"))
+    except (ValueError, UnicodeDecodeError) as error:
+        notes.append(f"{config} cannot be read as JSON ({error}): no settings read")
+        return None
+    if not isinstance(named, dict):
+        notes.append(f"{config} holds no table of settings: no settings read")
+        return None
+    return named
+
+
+def _settings_file(source: str, config: Path, notes: list) -> dict:
+    """The settings in ``config`` (JSON or YAML), in the source's names; an SB3 file gets SB3's PPO defaults for what
+    it leaves out, as rl-zoo's config.yml leaves out what a task's entry does not change."""
+    named = (_yaml_table if config.suffix in (".yml", ".yaml") else _json_table)(config, notes)
+    if named is None:
+        return {}
+    if not any(names[source] in named for names in SETTINGS.values()) and not (source == "sb3" and "policy" in named):
+        notes.append(f"{config} holds none of the settings the doctor checks ("
+                     + ", ".join(names[source] for names in SETTINGS.values()) + "): no settings read")  # fmt: skip
+        return {}
+    return _named_settings(source, (SB3_DEFAULTS | named) if source == "sb3" else named, str(config), notes)
+
+
+def _nearest(name: str, file: Path, top: Path) -> Path | None:
+    """The file ``name`` in the folder of ``file`` or the nearest folder above it, up to ``top``."""
+    folder = file.parent
+    while True:
+        if (folder / name).is_file():
+            return folder / name
+        if folder == top or folder == folder.parent or top not in folder.parents:
+            return None
+        folder = folder.parent
 
 
 def _cleanrl_hyperparameters(accumulator) -> dict:
     """CleanRL's hyperparameters table (``|param|value|`` rows of markdown) as {param: value}, or {} without one."""
     if CLEANRL_HYPERPARAMETERS not in accumulator.Tags().get("tensors", ()):
         return {}
-    text = accumulator.Tensors(CLEANRL_HYPERPARAMETERS)[0].tensor_proto.string_val[0].decode("utf-8", "replace")
+    strings = accumulator.Tensors(CLEANRL_HYPERPARAMETERS)[0].tensor_proto.string_val
+    text = strings[0].decode("utf-8", "replace") if strings else ""
     cells = (line.strip().strip("|").split("|") for line in text.splitlines())
     return {row[0].strip(): row[1].strip() for row in cells if len(row) == 2}
 
 
-def _with_settings(log: Log, file: Path, top: Path) -> Log:
-    """``log`` with the settings its run left beside it, or a note that it carries none."""
-    if log.source == "minippo" and (file.parent / RunFolder.CONFIG).is_file():
-        config = file.parent / RunFolder.CONFIG
-        try:
-            log.settings, log.settings_file = _named_settings("minippo", json.loads(config.read_text())), str(config)
-        except (ValueError, UnicodeDecodeError) as error:
-            log.notes.append(f"{config} cannot be read as JSON ({error}): no settings read")
-    elif log.source == "sb3" and log.file != "W&B CSV export":
-        log.settings, log.settings_file = _sb3_config(file, top, log.notes)
-    if not log.settings_file:
-        where = {"minippo": f"no {RunFolder.CONFIG} beside {file.name}",
-                 "sb3": f"no {SB3_CONFIG} (rl-zoo saves one) beside the log",
-                 "cleanrl": "no hyperparameters table in the events file"}[log.source]  # fmt: skip
-        if log.file == "W&B CSV export":
-            where = "a W&B export keeps its run's config apart"
+def _with_settings(log: Log, file: Path, top: Path, settings_path: Path | None = None) -> Log:
+    """``log`` with the run's settings: from ``settings_path`` when given, else those its run left beside it (or in
+    its events file); or a note that it carries none."""
+    if settings_path is not None:
+        if not settings_path.is_file():
+            raise MinippoError(f"--settings: no file {settings_path}")
+        log.settings, log.settings_file = _settings_file(log.source, settings_path, log.notes), str(settings_path)
+    elif log.source == "minippo" and (config := _nearest(RunFolder.CONFIG, file, file.parent)):
+        log.settings, log.settings_file = _settings_file("minippo", config, log.notes), str(config)
+    elif log.source == "sb3" and log.file != "W&B CSV export" and (config := _nearest(SB3_CONFIG, file, top)):
+        log.settings, log.settings_file = _settings_file("sb3", config, log.notes), str(config)
+    if not log.settings:
+        log.settings_file = None
         if not any("no settings read" in note for note in log.notes):
-            log.notes.append(f"the run's settings are not in the log ({where}): the checks of its settings were not "
-                             "made")  # fmt: skip
+            where = {"minippo": f"no {RunFolder.CONFIG} beside {file.name}",
+                     "sb3": f"no {SB3_CONFIG} in rl-zoo's format beside the log or above it",
+                     "cleanrl": "no hyperparameters table in the events file"}[log.source]  # fmt: skip
+            if log.file == "W&B CSV export":
+                where = "a W&B export keeps its run's config apart"
+            log.notes.append(f"the run's settings are not in the log ({where}; give them with --settings FILE): the "
+                             "checks of its settings were not made")  # fmt: skip
     return log
 
 
-def read_log(path) -> Log:
+def read_log(path, settings=None) -> Log:
     """The log at ``path`` (a CSV file, an events file, or a folder holding progress.csv or one run's event files), with
-    the run's settings where the log carries them."""
+    the run's settings: from the file ``settings`` (a JSON or YAML table in the source's names) when given, else where
+    the log carries them."""
     log, file = _read_log(Path(path))
-    return _with_settings(log, file, Path(path) if Path(path).is_dir() else file.parent)
+    top = Path(path) if Path(path).is_dir() else file.parent
+    return _with_settings(log, file, top, None if settings is None else Path(settings))
 
 
 def _read_log(path: Path) -> tuple[Log, Path]:

@@ -209,6 +209,9 @@ def test_evaluate_counts_false_alarms_recall_and_the_right_cause_first(tmp_path)
     assert (rows["check", "critic-not-trained"]["flagged"], rows["check", "critic-not-trained"]["false_alarms"]) == (
         "1", "0")
     assert (rows["fault", "vf_0"]["flagged"], rows["fault, rules only", "vf_0"]["flagged"]) == ("1", "0")
+    # vf_0 ends where the healthy runs do: missed by the rules although no worse than healthy
+    assert (rows["overall", "all runs, rules only"]["unharmed_missed"], rows["overall", "all runs"]["unharmed_missed"]
+            ) == ("1", "0")  # fmt: skip
     assert (rows["rule", "kl-spike"]["false_alarms"], rows["rule", "kl-spike"]["broken_runs"]) == ("1", "0")
     assert (rows["rule", "no-clip"]["flagged"], rows["rule", "no-clip"]["broken_runs"]) == ("1", "2")
     assert (rows["fault", "clip_10"]["flagged"], rows["fault", "clip_10"]["first_right"]) == ("2", "1")
@@ -253,3 +256,6 @@ def test_a_broken_run_is_harmed_when_it_ends_below_every_healthy_run_of_its_sett
     runs = healthy + [below, within, zeroed]
     assert [doctor_confusion.harmed(r, runs) for r in (below, within, zeroed)] == ["yes", "no", "n/a"]
     assert doctor_confusion.harmed(run("vf_0", -200.0, library="cleanrl"), runs) == "n/a"  # no healthy run to compare
+    tuned = dc.Run("zoo", "campaign", "held-out", "sb3", "Acrobot-v1", "healthy", "", healthy[0].rows[:20] + [
+        {"update": u, "return_mean": 0.0} for u in range(20, 40)], {}, "zoo", "1x")  # fmt: skip
+    assert doctor_confusion.harmed(within, runs + [tuned]) == "no"  # a healthy run of other settings is no peer

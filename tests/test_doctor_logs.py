@@ -350,13 +350,44 @@ def test_a_healthy_cleanrl_run_is_checked_against_its_settings_and_passes(tmp_pa
 
 def test_rl_zoos_config_yml_beside_an_sb3_log_is_read_with_sb3s_defaults_for_what_it_leaves_out(tmp_path, capsys):
     run = sb3_log(tmp_path / "sb3", iterations=20)
-    rl_zoo_config(run, {"clip_range": "lin_0.2", "learning_rate": "lin_0.001", "n_envs": 8, "n_epochs": 20,
-                        "vf_coef": 0.0, "policy": "MlpPolicy"})  # fmt: skip
-    log = read_log(run)
-    assert log.settings == {"clip_epsilon": 0.2, "value_coef": 0.0, "entropy_coef": 0.0, "lr": 0.001, "epochs": 20.0}
+    rl_zoo_config(run, {"learning_rate": "lin_0.001", "n_envs": 8, "n_epochs": 20, "ent_coef": -0.01,
+                        "policy": "MlpPolicy"})  # fmt: skip
+    log = read_log(run)  # clip_range and vf_coef are SB3's defaults, 0.2 and 0.5
+    assert log.settings == {"clip_epsilon": 0.2, "value_coef": 0.5, "entropy_coef": -0.01, "lr": 0.001, "epochs": 20.0}
     assert log.settings_file == str(run / "config.yml")
     assert main(["doctor", str(run / "progress.csv")]) == 1  # the CSV file's path finds the config beside it too
-    assert "1. setting value_coef = 0 (<= 0 by definition" in capsys.readouterr().out
+    assert "1. setting entropy_coef = -0.01 (< 0 by definition" in capsys.readouterr().out
+    rl_zoo_config(run, {"clip_range": "lin_0.2", "vf_coef": 0.0, "policy": "MlpPolicy"})
+    assert read_log(run).settings == {"clip_epsilon": 0.2, "value_coef": 0.0, "entropy_coef": 0.0, "lr": 3e-4,
+                                      "epochs": 10.0}  # fmt: skip
+
+
+def test_a_config_yml_above_sb3s_tensorboard_folder_is_found_up_to_the_path_given(tmp_path):
+    """PPO(..., tensorboard_log=folder) writes folder/PPO_1/events.out.tfevents.*: a config.yml in folder is found when
+    the doctor is given folder, and not when it is given folder/PPO_1 (it never reads above the path given)."""
+    pytest.importorskip("tensorboard", reason="needs the tensorboard package (pip install 'minippo[doctor]')")
+    folder = tmp_path / "tb"
+    sb3_log(folder / "PPO_1", iterations=20, formats=("tensorboard",))
+    rl_zoo_config(folder, {"vf_coef": 0.0, "policy": "MlpPolicy"})
+    log = read_log(folder)
+    assert (log.file, log.settings["value_coef"], log.settings_file) == ("TensorBoard events", 0.0,
+                                                                         str(folder / "config.yml"))  # fmt: skip
+    below = read_log(folder / "PPO_1")
+    assert below.settings == {} and any("give them with --settings FILE" in note for note in below.notes)
+    assert read_log(folder / "PPO_1", settings=folder / "config.yml").settings["value_coef"] == 0.0
+
+
+def test_settings_named_with_the_settings_option_are_checked(tmp_path, capsys):
+    run = sb3_log(tmp_path / "sb3", iterations=20)
+    elsewhere = tmp_path / "logs" / "ppo" / "CartPole-v1_1" / "CartPole-v1"  # where rl-zoo saves its config.yml
+    elsewhere.mkdir(parents=True)
+    rl_zoo_config(elsewhere, {"clip_range": 10.0, "policy": "MlpPolicy"})
+    assert main(["doctor", str(run), "--settings", str(elsewhere / "config.yml")]) == 1
+    assert "[clip-cannot-bind]" in capsys.readouterr().out
+    (tmp_path / "args.json").write_text(json.dumps({"clip_range": 0.2, "ent_coef": 0.0}))
+    assert main(["doctor", str(run), "--settings", str(tmp_path / "args.json")]) == 0
+    assert main(["doctor", str(run), "--settings", str(tmp_path / "missing.yml")]) == 2
+    assert "--settings: no file" in capsys.readouterr().err
 
 
 def test_a_clip_range_of_1_or_more_is_out_of_bounds_and_a_minippo_config_is_read(tmp_path, capsys):
@@ -381,15 +412,44 @@ def test_a_clip_range_of_1_or_more_is_out_of_bounds_and_a_minippo_config_is_read
     assert "[clip-cannot-bind]" not in report(minippo_run)[0]
 
 
-def test_a_log_without_settings_says_so_and_a_config_it_cannot_read_is_a_note(tmp_path, capsys):
+def test_a_log_without_settings_says_so_and_settings_it_cannot_use_are_notes(tmp_path, capsys):
     run = sb3_log(tmp_path / "sb3", iterations=20)
     log = read_log(run)
     assert log.settings == {} and log.settings_file is None
     assert any("the run's settings are not in the log" in note and "config.yml" in note for note in log.notes)
     assert main(["doctor", str(run)]) == 0  # the status is the rules': a log without settings is not a finding
+    capsys.readouterr()
     pytest.importorskip("yaml", reason="needs PyYAML (pip install 'minippo[doctor]')")
-    (run / "config.yml").write_text("clip_range: [unclosed\n")
-    log = read_log(run)
-    assert log.settings == {} and any("cannot be read as rl-zoo's config.yml" in note for note in log.notes)
-    assert main(["doctor", str(run)]) == 0
-    assert "Traceback" not in capsys.readouterr().err
+    for text, says in [("clip_range: [unclosed\n", "cannot be read as YAML"),
+                       ("- 1\n- 2\n", "holds no table of hyperparameters"),
+                       ("foo: bar\n", "holds none of the settings the doctor checks")]:  # fmt: skip
+        (run / "config.yml").write_text(text)
+        log = read_log(run)
+        assert log.settings == {} and any(says in note for note in log.notes), text
+        assert main(["doctor", str(run), "--json"]) == 0
+        assert json.loads(capsys.readouterr().out)["settings"] == {}
+    (run / "config.yml").write_text("vf_coef: .nan\nent_coef: false\nclip_range: 0.2\nn_epochs: 10\n")
+    log = read_log(run)  # not numbers: said, and not checked (SB3's defaults stand in for neither)
+    assert log.settings == {"clip_epsilon": 0.2, "lr": 3e-4, "epochs": 10.0}
+    assert sum("is not a number: not checked" in note for note in log.notes) == 2
+    assert main(["doctor", str(run), "--json"]) == 0  # strict JSON: no NaN
+    assert json.loads(capsys.readouterr().out)["settings"] == log.settings
+
+
+def test_a_minippo_config_that_is_not_a_table_or_has_no_numbers_is_a_note(tmp_path, capsys):
+    rows = [{"update": u, "step": 256 * u, "return_mean": 10 + u, "approx_kl": kl_of(u), "clip_fraction": 0.05,
+             "entropy": 0.69 - 0.001 * u, "explained_variance": 0.5, "value_loss": 20.0} for u in range(1, 21)]
+    run = tmp_path / "minippo"
+    run.mkdir()
+    with open(run / "progress.csv", "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    for text, says in [("[1, 2]", "holds no table of settings"), ("null", "holds no table of settings"),
+                       ("{not json", "cannot be read as JSON"),
+                       ('{"lr": 1' + "0" * 400 + ', "value_coef": 0.5}', "lr = ")]:  # fmt: skip
+        (run / "config.json").write_text(text)
+        log = read_log(run)
+        assert any(says in note for note in log.notes), (text[:20], log.notes)
+        assert main(["doctor", str(run), "--json"]) == 0, text[:20]
+        capsys.readouterr()
