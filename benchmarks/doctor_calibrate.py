@@ -221,10 +221,11 @@ def _range(values) -> list:
     return [float(values.min()), float(values.max())] if len(values) else [math.nan, math.nan]
 
 
-def calibrate_rule(rule: doctor.Rule, measured: list[tuple[Run, list[float]]], earlier=None) -> dict | None:
+def calibrate_rule(rule: doctor.Rule, measured: list[tuple[Run, list[float]]], earlier=None,
+                   labels=None) -> dict | None:  # fmt: skip
     """The thresholds of ``rule`` from ``measured`` ((run, the statistic of each condition) per sample), or None when
     no sample of its faults has its statistics. ``earlier``: per sample, whether a rule before this one flags it (a
-    broken run so flagged is not one a relative signature must keep clear of)."""
+    broken run so flagged is not one a relative signature must keep clear of); ``labels``: per sample, its name."""
     named = set(FAULTS_NAMED[rule.id])
     conditions = rule.conditions
     earlier = [False] * len(measured) if earlier is None else earlier
@@ -264,6 +265,11 @@ def calibrate_rule(rule: doctor.Rule, measured: list[tuple[Run, list[float]]], e
             broken[:, 1], also["threshold"], second.comparison)
         entry["also"] = {**also, "scale": second_scale, "healthy": _range(healthy[:, 1])}
     entry.update(scale=scale, healthy=_range(healthy[:, 0]), broken_samples=len(broken), caught=int(caught.sum()))
+    if labels is not None:  # the healthy sample nearest the threshold, to name in the chapter
+        kept = [label for label, (run, values) in zip(labels, measured)
+                if run.healthy and all(math.isfinite(v) for v in values)]  # fmt: skip
+        sign = 1.0 if first.comparison == ">" else -1.0
+        entry["healthy_extreme"] = kept[int(np.argmax(sign * healthy[:, 0]))]
     return entry
 
 
@@ -275,10 +281,12 @@ def thresholds(runs: list[Run], signatures=doctor.SIGNATURES) -> dict:
                                     f"part were given ({foreign[0]}, ...)")  # fmt: skip
     table = {}
     sampled = samples(runs)
+    labels = [run.id + (f" (its first {len(rows)} updates)" if len(rows) < len(run.rows) else "")
+              for run, rows in sampled]  # fmt: skip
     earlier = [False] * len(sampled)  # per sample: flagged by a rule before the one being set
     for rule in signatures:
         measured = [(run, [condition.measure(rows)[0] for condition in rule.conditions]) for run, rows in sampled]
-        entry = calibrate_rule(rule, measured, earlier)
+        entry = calibrate_rule(rule, measured, earlier, labels)
         if entry is None:
             continue
         table[rule.id] = entry

@@ -98,6 +98,8 @@ def test_each_calibrated_threshold_lies_between_its_healthy_and_broken_runs(tmp_
     _, table = calibrated_rules(tmp_path)
     assert {"not-ppo-reward", "no-clip", "kl-spike", "entropy-collapse", "critic-worse-than-constant"} <= set(
         table["rules"])
+    # the healthy run nearest the threshold is named: the second healthy run, whose KL is the higher throughout
+    assert table["rules"]["kl-spike"]["healthy_extreme"] == "minippo-defaults-CartPole-v1-healthy-1x-seed1"
     for rule in doctor.SIGNATURES:
         entry = table["rules"].get(rule.id)
         for condition, part in zip(rule.conditions, [entry, entry and entry.get("also")]):
