@@ -184,7 +184,8 @@ def test_evaluate_counts_false_alarms_recall_and_the_right_cause_first(tmp_path)
     runs = [("healthy", "calibration", rows_of()),
             ("healthy", "calibration", rows_of(approx_kl=0.3, clip_fraction=0.4)),  # a false alarm: kl-spike
             ("clip_10", "calibration", rows_of(approx_kl=0.6, clip_fraction=0.001)),  # named right: no-clip
-            ("clip_10", "calibration", rows_of(approx_kl=0.3, clip_fraction=0.4)),  # flagged, the wrong cause
+            ("clip_10", "calibration", rows_of(approx_kl=0.3, clip_fraction=0.4,  # flagged, the wrong cause; and
+                                               return_mean=list(np.linspace(20, 10, N)))),  # harmed: ends lower
             ("vf_0", "calibration", rows_of()),  # missed
             ("lr_x30", "held-out", rows_of(approx_kl=0.3, clip_fraction=0.4))]  # of the other part: not counted
     folder, record, manifest = campaign(tmp_path, runs)
@@ -214,6 +215,7 @@ def test_evaluate_counts_false_alarms_recall_and_the_right_cause_first(tmp_path)
     # vf_0 ends where the healthy runs do: missed by the rules although no worse than healthy
     assert (rows["overall", "all runs, rules only"]["unharmed_missed"], rows["overall", "all runs"]["unharmed_missed"]
             ) == ("1", "0")  # fmt: skip
+    assert (rows["overall", "all runs"]["harmed_runs"], rows["overall", "all runs"]["harmed_flagged"]) == ("1", "1")
     assert (rows["rule", "kl-spike"]["false_alarms"], rows["rule", "kl-spike"]["broken_runs"]) == ("1", "0")
     assert (rows["rule", "no-clip"]["flagged"], rows["rule", "no-clip"]["broken_runs"]) == ("1", "2")
     assert (rows["fault", "clip_10"]["flagged"], rows["fault", "clip_10"]["first_right"]) == ("2", "1")
