@@ -58,7 +58,7 @@ MANIFEST_CSV = common.RESULTS / "doctor_manifest.csv"  # benchmarks/doctor_runs.
 RUN_ROOT = common.RUNS / "doctor"
 ATLAS_CSV = common.RESULTS / "atlas_runs.csv"
 RULES_CSV = common.RESULTS / "doctor_rules.csv"  # the rule table, as doctor.RULES has it after calibrate
-RULE_FIELDS = ["rule", "condition", "variable", "window", "statistic", "level", "comparison", "threshold",
+RULE_FIELDS = ["source", "rule", "condition", "variable", "window", "statistic", "level", "comparison", "threshold",
                "healthy_low", "healthy_high", "anchor", "causes"]  # fmt: skip
 PARTS = ("calibration", "held-out")
 CALIBRATION = "calibration"
@@ -299,7 +299,8 @@ def calibrate(runs_dir: Path, record_json: Path | None, manifest_csv: Path, atla
               argv) -> dict:  # fmt: skip
     runs, left_out = read_part(CALIBRATION, runs_dir, manifest_csv, record_json)
     atlas = atlas_runs(atlas_csv) if atlas_csv else []
-    rules = thresholds(runs + atlas)
+    sources = {source: thresholds([run for run in runs + atlas if run.library == source])
+               for source in dict.fromkeys(run.library for run in runs + atlas)}  # fmt: skip
     manifest = read_rows(manifest_csv)
     counts = {"campaign healthy": sum(r.healthy for r in runs), "campaign broken": sum(not r.healthy for r in runs),
               "atlas healthy": sum(r.healthy for r in atlas), "atlas broken": sum(not r.healthy for r in atlas),
@@ -312,44 +313,53 @@ def calibrate(runs_dir: Path, record_json: Path | None, manifest_csv: Path, atla
             "in the manifest"]}},  # fmt: skip
         "principle": " ".join(" ".join(__doc__.split("\n\n")[2:5]).split()),
         "calibration runs": sorted(run.id for run in runs),
-        "rules": rules,
+        "sources": sources,  # a log's source: {rule id: its thresholds}, set on that library's runs alone
     }
     out.write_text(json.dumps(record, indent=1, ensure_ascii=False) + "\n")
     return record
 
 
-def rule_rows(rules, checks=doctor.CHECKS) -> list[dict]:
-    """The rule table: a row per check of the settings (its bound, by definition), then a row per condition of each
-    rule (the first, then ``also``), its threshold and healthy range in the 4 significant digits the doctor prints,
-    its section and its causes."""
-    rows = [{"rule": check.id, "condition": "setting", "variable": check.setting, "window": "", "statistic": "",
-             "level": "", "comparison": check.comparison, "threshold": f"{check.bound:.4g}", "healthy_low": "",
-             "healthy_high": "", "anchor": check.anchor, "causes": " | ".join(check.causes)}
+def rule_rows(rules_by_source: dict, checks=doctor.CHECKS) -> list[dict]:
+    """The rule table: a row per check of the settings (its bound, by definition, for every source), then per source a
+    row per condition of each rule (the first, then ``also``), its threshold and healthy range in the 4 significant
+    digits the doctor prints, its section and its causes."""
+    rows = [{"source": "any", "rule": check.id, "condition": "setting", "variable": check.setting, "window": "",
+             "statistic": "", "level": "", "comparison": check.comparison, "threshold": f"{check.bound:.4g}",
+             "healthy_low": "", "healthy_high": "", "anchor": check.anchor, "causes": " | ".join(check.causes)}
             for check in checks]  # fmt: skip
-    for rule in rules:
-        for which, condition in zip(("first", "also"), rule.conditions):
-            rows.append({"rule": rule.id, "condition": which, "variable": condition.variable,
-                         "window": condition.window, "statistic": condition.statistic,
-                         "level": "" if condition.level is None else f"{condition.level:.4g}",
-                         "comparison": condition.comparison, "threshold": f"{condition.threshold:.4g}",
-                         "healthy_low": f"{condition.healthy[0]:.4g}", "healthy_high": f"{condition.healthy[1]:.4g}",
-                         "anchor": rule.anchor if which == "first" else "",
-                         "causes": " | ".join(rule.causes) if which == "first" else ""})  # fmt: skip
+    for source, rules in rules_by_source.items():
+        for rule in rules:
+            rows += _condition_rows(source, rule)
+    return rows
+
+
+def _condition_rows(source: str, rule) -> list[dict]:
+    """A rule's rows of the rule table: its condition, and its second one (``also``) for a relative signature."""
+    rows = []
+    for which, condition in zip(("first", "also"), rule.conditions):
+        rows.append({"source": source, "rule": rule.id, "condition": which, "variable": condition.variable,
+                     "window": condition.window, "statistic": condition.statistic,
+                     "level": "" if condition.level is None else f"{condition.level:.4g}",
+                     "comparison": condition.comparison, "threshold": f"{condition.threshold:.4g}",
+                     "healthy_low": f"{condition.healthy[0]:.4g}", "healthy_high": f"{condition.healthy[1]:.4g}",
+                     "anchor": rule.anchor if which == "first" else "",
+                     "causes": " | ".join(rule.causes) if which == "first" else ""})  # fmt: skip
     return rows
 
 
 def calibration_table(record: dict) -> str:
     rows = []
-    for rule_id, entry in record["rules"].items():
-        rule = next(r for r in doctor.SIGNATURES if r.id == rule_id)
-        for condition, part in zip(rule.conditions, [entry, entry.get("also")]):
-            rows.append([f"`{rule_id}`" if part is entry else "  and", f"{condition.statistic} of "
-                         f"`{condition.variable}`", f"{condition.comparison} {part['threshold']:.4g}",
-                         "–".join(f"{x:.3g}" for x in part["healthy"]), _number(part["nearest_negative"]),
-                         _number(part["nearest_broken"]), part["basis"],
-                         f"{entry['caught']}/{entry['broken_samples']}" if part is entry else ""])  # fmt: skip
-    return common_markdown(["rule", "reads", "flags", "healthy runs", "nearest kept clear", "nearest broken",
-                            "set by", "its faults caught"], rows)  # fmt: skip
+    for source, entries in record["sources"].items():
+        for rule_id, entry in entries.items():
+            rule = next(r for r in doctor.SIGNATURES if r.id == rule_id)
+            for condition, part in zip(rule.conditions, [entry, entry.get("also")]):
+                rows.append([source, f"`{rule_id}`" if part is entry else "  and", f"{condition.statistic} of "
+                             f"`{condition.variable}`", f"{condition.comparison} {part['threshold']:.4g}",
+                             "–".join(f"{x:.3g}" for x in part["healthy"]), _number(part["nearest_negative"]),
+                             _number(part["nearest_broken"]), part["basis"],
+                             f"{entry['caught']}/{entry['broken_samples']}" if part is entry else ""])  # fmt: skip
+    return common_markdown(["source", "rule", "reads", "flags", "healthy runs", "nearest kept clear",
+                            "nearest broken", "set by", "its faults caught"], rows)  # fmt: skip
 
 
 def _number(value) -> str:
@@ -387,8 +397,10 @@ def main(argv=None) -> int:
             atlas_signatures.summarize()  # the atlas's record, from its runs
         record = calibrate(args.runs, args.record, args.manifest, None if args.no_atlas else ATLAS_CSV,
                            args.thresholds, argv)  # fmt: skip
-        common.write_rows(args.rules, rule_rows(doctor.calibrated(doctor.SIGNATURES, record)), RULE_FIELDS)
-        print(f"{common.relative(args.thresholds)}: {len(record['rules'])} rules from "
+        by_source = {source: doctor.calibrated(doctor.SIGNATURES, record, source) for source in doctor.SOURCES
+                     if source in record["sources"]}  # fmt: skip
+        common.write_rows(args.rules, rule_rows(by_source), RULE_FIELDS)
+        print(f"{common.relative(args.thresholds)}: the rules of {len(record['sources'])} sources from "
               + ", ".join(f"{n} {what}" for what, n in record["runs"][CALIBRATION].items()))
         print(calibration_table(record))
         print(f"{common.relative(args.rules)}: the rule table")

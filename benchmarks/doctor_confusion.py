@@ -64,15 +64,17 @@ def evaluate(part: str, runs_dir: Path, record_json: Path | None, manifest_csv: 
     """The doctor on every recorded run of ``part``: the checks of the settings its log carries, then the rules; and
     again with the rules alone (what the doctor makes of a log without settings)."""
     table = doctor.load_thresholds(thresholds_json)
-    rules = doctor.calibrated(doctor.SIGNATURES, table)
+    rules = {source: doctor.calibrated(doctor.SIGNATURES, table, source) for source in doctor.SOURCES}
     runs, left_out = read_part(part, runs_dir, manifest_csv, record_json)
-    verdicts = {run.id: [f.rule.id for f in doctor.diagnose(run.rows, rules, run.settings)] for run in runs}
-    logs_only = {run.id: [f.rule.id for f in doctor.diagnose(run.rows, rules, checks=())] for run in runs}
+    verdicts = {run.id: [f.rule.id for f in doctor.diagnose(run.rows, rules[run.library], run.settings)]
+                for run in runs}  # fmt: skip
+    logs_only = {run.id: [f.rule.id for f in doctor.diagnose(run.rows, rules[run.library], checks=())] for run in runs}
     healthy = [run for run in runs if run.healthy]
     broken = [run for run in runs if not run.healthy]
     harm = {run.id: harmed(run, runs) for run in broken}
     rows = []
-    for rule in (*doctor.CHECKS, *rules):
+    every = {rule.id: rule for source_rules in rules.values() for rule in source_rules}  # each rule once
+    for rule in (*doctor.CHECKS, *every.values()):
         mine = [run for run in broken if names_fault(rule.id, run.fault)]
         alarms = sum(rule.id in verdicts[run.id] for run in healthy)
         caught = sum(rule.id in verdicts[run.id] for run in mine)

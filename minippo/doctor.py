@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from minippo.doctor_logs import NAMES, UNITS, Log, read_log
+from minippo.doctor_logs import NAMES, SOURCES, UNITS, Log, read_log
 from minippo.errors import MinippoError
 from minippo.run_folder import PROGRESS_FIELDS  # noqa: F401 (the book reads the atlas's columns by this name)
 
@@ -302,12 +302,14 @@ def load_thresholds(path=THRESHOLDS_JSON) -> dict:
         return {"rules": {}}
 
 
-def calibrated(signatures=SIGNATURES, table: dict | None = None) -> tuple[Rule, ...]:
-    """The rules of ``signatures`` that ``table`` (load_thresholds()) has thresholds for, with them."""
+def calibrated(signatures=SIGNATURES, table: dict | None = None, source: str = "minippo") -> tuple[Rule, ...]:
+    """The rules of ``signatures`` that ``table`` (load_thresholds()) has thresholds for, with them: those of the
+    log's ``source`` (a key of doctor_logs.SOURCES) when the table has thresholds per source."""
     table = load_thresholds() if table is None else table
+    entries = table["sources"].get(source, {}) if "sources" in table else table["rules"]
     rules = []
     for rule in signatures:
-        entry = table["rules"].get(rule.id)
+        entry = entries.get(rule.id)
         if entry is None or (rule.also is None) != ("also" not in entry):
             continue
         also = rule.also and replace(rule.also, threshold=entry["also"]["threshold"],
@@ -316,9 +318,14 @@ def calibrated(signatures=SIGNATURES, table: dict | None = None) -> tuple[Rule, 
     return tuple(rules)
 
 
+# A threshold is set per source: the libraries log the same names for different measurements (doctor_logs.py's
+# tables: SB3's approx KL is an average over the last epoch's minibatches, CleanRL's the last minibatch's, both before
+# their step; minippo's the whole batch's after the update), so each is held to the healthy runs of its own library.
 THRESHOLDS = load_thresholds()
-RULES = calibrated(SIGNATURES, THRESHOLDS)
-UNCALIBRATED = tuple(rule.id for rule in SIGNATURES if rule.id not in {r.id for r in RULES})
+RULES_BY_SOURCE = {source: calibrated(SIGNATURES, THRESHOLDS, source) for source in SOURCES}
+RULES = RULES_BY_SOURCE["minippo"]
+UNCALIBRATED = {source: tuple(rule.id for rule in SIGNATURES if rule.id not in {r.id for r in rules})
+                for source, rules in RULES_BY_SOURCE.items()}  # fmt: skip
 
 
 def _range(low_high) -> str:
@@ -401,12 +408,13 @@ def report(path, as_json: bool = False, settings=None) -> tuple[str, int]:
     log = read_log(path, settings)
     rows = log.rows
     settings_found = check_settings(log.settings, CHECKS, log.settings_file or "")
-    findings = settings_found + diagnose(rows, RULES, checks=())
-    missing = {rule.id: rule.missing(rows, log) for rule in RULES}
+    rules = RULES_BY_SOURCE[log.source]
+    findings = settings_found + diagnose(rows, rules, checks=())
+    missing = {rule.id: rule.missing(rows, log) for rule in rules}
     if all(missing.values()):
         reasons = dict.fromkeys(reason.split(": ", 1)[1] for reason in missing.values())
         raise MinippoError(f"{path}: not enough data for any rule: " + "; ".join(reasons))
-    measured = [(rule, *rule.measure(rows), rule.also.measure(rows)[0] if rule.also else math.nan) for rule in RULES]
+    measured = [(rule, *rule.measure(rows), rule.also.measure(rows)[0] if rule.also else math.nan) for rule in rules]
     status = 1 if findings else 3 if any(missing.values()) else 0
     if as_json:
 
@@ -428,7 +436,7 @@ def report(path, as_json: bool = False, settings=None) -> tuple[str, int]:
                            "settings_checked": [{"id": check.id, "setting": check.setting,
                                                  "value": log.settings.get(check.setting),
                                                  "found": check.holds(log.settings)} for check in CHECKS],
-                           "not_checked": [rule.id for rule in RULES if missing[rule.id]]},
+                           "not_checked": [rule.id for rule in rules if missing[rule.id]]},
                           indent=1, allow_nan=False)  # fmt: skip
         return text, status
     head = f"{path}: {NAMES[log.source]} {log.file}, {len(rows)} updates"
@@ -449,7 +457,7 @@ def report(path, as_json: bool = False, settings=None) -> tuple[str, int]:
             first, *rest = finding.lines()
             lines += [f"{number}. {first}", *rest]
     else:
-        by = f"by the {len(checked)} rules of {len(RULES)} that could be checked " if len(checked) < len(RULES) else ""
+        by = f"by the {len(checked)} rules of {len(rules)} that could be checked " if len(checked) < len(rules) else ""
         lines += [f"no failure signature found {by}in {len(rows)} updates; what was checked, against the healthy "
                   f"ranges ({CHAPTER}#atlas-healthy):"]  # fmt: skip
         for rule, value, first, last, also_value in checked:

@@ -73,7 +73,7 @@ def test_calibrate_never_opens_a_held_out_run_and_its_extremes_move_no_threshold
     _, with_held_out = calibrated_rules(tmp_path / "with")
     assert opened and not any("seed7" in name for name in opened)  # the held-out run's folder
     _, without = calibrated_rules(tmp_path / "without", CAMPAIGN[:-1])
-    assert with_held_out["rules"] == without["rules"]
+    assert with_held_out["sources"] == without["sources"]
     assert with_held_out["runs"]["calibration"]["campaign healthy"] == 2
     assert with_held_out["runs"]["held-out"] == {"read": 0, "in the manifest": 1}
 
@@ -97,11 +97,11 @@ def test_a_cut_lies_between_the_healthy_extreme_and_the_nearest_broken_run():
 def test_each_calibrated_threshold_lies_between_its_healthy_and_broken_runs(tmp_path):
     _, table = calibrated_rules(tmp_path)
     assert {"not-ppo-reward", "no-clip", "kl-spike", "entropy-collapse", "critic-worse-than-constant"} <= set(
-        table["rules"])
+        table["sources"]["minippo"])
     # the healthy run nearest the threshold is named: the second healthy run, whose KL is the higher throughout
-    assert table["rules"]["kl-spike"]["healthy_extreme"] == "minippo-defaults-CartPole-v1-healthy-1x-seed1"
+    assert table["sources"]["minippo"]["kl-spike"]["healthy_extreme"] == "minippo-defaults-CartPole-v1-healthy-1x-seed1"
     for rule in doctor.SIGNATURES:
-        entry = table["rules"].get(rule.id)
+        entry = table["sources"]["minippo"].get(rule.id)
         for condition, part in zip(rule.conditions, [entry, entry and entry.get("also")]):
             if part is None:
                 continue
@@ -112,16 +112,18 @@ def test_each_calibrated_threshold_lies_between_its_healthy_and_broken_runs(tmp_
             if part["basis"] == "midpoint":  # strictly between that and the nearest broken run, which it flags
                 low, high = sorted([part["nearest_negative"], part["nearest_broken"]])
                 assert low < part["threshold"] < high and test.holds(part["nearest_broken"]), rule.id
-    kl = table["rules"]["kl-spike"]  # the healthy runs' largest KL 0.008, the step size's 0.09: their geometric mean
+    kl = table["sources"]["minippo"]["kl-spike"]  # the healthy runs' largest KL 0.008, the step size's 0.09:
+    # their geometric mean
     assert kl["threshold"] == pytest.approx(math.sqrt(0.008 * 0.09)) and kl["healthy"][1] == pytest.approx(0.008)
 
 
 def test_the_shipped_thresholds_cover_every_rule_and_flag_no_healthy_extreme():
     table = doctor.load_thresholds()
-    assert doctor.UNCALIBRATED == () and len(doctor.RULES) == len(doctor.SIGNATURES)
+    assert set(table["sources"]) == set(doctor.RULES_BY_SOURCE)  # each source calibrated on its own runs
+    assert doctor.UNCALIBRATED["minippo"] == () and len(doctor.RULES) == len(doctor.SIGNATURES)
     assert {"command", "commit", "date", "runs", "principle"} <= set(table)
     assert table["runs"]["held-out"]["read"] == 0
-    for rule in doctor.RULES:
+    for rule in (rule for rules in doctor.RULES_BY_SOURCE.values() for rule in rules):
         assert all(math.isfinite(condition.threshold) for condition in rule.conditions), rule.id
         if rule.also is None:  # a relative signature's conditions hold on healthy runs one at a time, not together
             assert not any(rule.holds(x) for x in rule.healthy), rule.id
@@ -132,9 +134,10 @@ def test_the_thresholds_file_round_trips(tmp_path):
     read = doctor.load_thresholds(tmp_path / "thresholds.json")
     assert read == json.loads(json.dumps(table))
     again = doctor.calibrated(doctor.SIGNATURES, read)
-    assert again == rules and [rule.id for rule in again] == [r.id for r in doctor.SIGNATURES if r.id in read["rules"]]
+    named = read["sources"]["minippo"]
+    assert again == rules and [rule.id for rule in again] == [r.id for r in doctor.SIGNATURES if r.id in named]
     for rule in again:
-        entry = read["rules"][rule.id]
+        entry = read["sources"]["minippo"][rule.id]
         assert rule.threshold == entry["threshold"] and list(rule.healthy) == entry["healthy"]
         if rule.also:
             assert rule.also.threshold == entry["also"]["threshold"]
@@ -242,10 +245,12 @@ def test_the_committed_rule_table_is_the_codes():
     a threshold changed in minippo/doctor_thresholds.json, or a rule changed in doctor.py, without calibrating again
     shows here."""
     rows = read_rows(dc.RULES_CSV)
-    assert rows == dc.rule_rows(doctor.RULES)
+    assert rows == dc.rule_rows(doctor.RULES_BY_SOURCE)
     assert [row["rule"] for row in rows if row["condition"] == "setting"] == [check.id for check in doctor.CHECKS]
-    assert [row["rule"] for row in rows if row["condition"] == "first"] == [rule.id for rule in doctor.RULES]
-    assert [row["rule"] for row in rows if row["condition"] == "also"] == [r.id for r in doctor.RULES if r.also]
+    for source, rules in doctor.RULES_BY_SOURCE.items():
+        mine = [row for row in rows if row["source"] == source]
+        assert [row["rule"] for row in mine if row["condition"] == "first"] == [rule.id for rule in rules]
+        assert [row["rule"] for row in mine if row["condition"] == "also"] == [r.id for r in rules if r.also]
 
 
 def test_a_broken_run_is_harmed_when_it_ends_below_every_healthy_run_of_its_setting():
