@@ -436,7 +436,8 @@ def report(path, as_json: bool = False, settings=None) -> tuple[str, int]:
                            "settings_checked": [{"id": check.id, "setting": check.setting,
                                                  "value": log.settings.get(check.setting),
                                                  "found": check.holds(log.settings)} for check in CHECKS],
-                           "not_checked": [rule.id for rule in rules if missing[rule.id]]},
+                           "not_checked": [rule.id for rule in rules if missing[rule.id]],
+                           "uncalibrated": list(UNCALIBRATED[log.source])},
                           indent=1, allow_nan=False)  # fmt: skip
         return text, status
     head = f"{path}: {NAMES[log.source]} {log.file}, {len(rows)} updates"
@@ -468,4 +469,7 @@ def report(path, as_json: bool = False, settings=None) -> tuple[str, int]:
                          f"{rule.also.threshold:.4g}; healthy runs: {_range(rule.also.healthy)})  [{rule.id}]")
             lines += [line]
     lines += [reason for reason in missing.values() if reason]
+    if UNCALIBRATED[log.source]:
+        lines += [f"not applied to {NAMES[log.source]} logs (no calibration run of that library has their faults): "
+                  + ", ".join(UNCALIBRATED[log.source])]  # fmt: skip
     return "\n".join(lines), status

@@ -8,7 +8,7 @@ import pytest
 
 from minippo.cli import main
 from minippo.config import Config
-from minippo.doctor import ANCHORS, MIN_UPDATES, RULES, WINDOWS, Rule, diagnose, read_run
+from minippo.doctor import ANCHORS, MIN_UPDATES, RULES, RULES_BY_SOURCE, UNCALIBRATED, WINDOWS, Rule, diagnose, read_run
 from minippo.errors import MinippoError
 from minippo.ppo import train
 from minippo.presets import CARTPOLE_PPO
@@ -109,7 +109,8 @@ def test_the_doctor_reads_a_stable_baselines3_log_from_the_command_line(capsys):
     assert main(["doctor", str(SB3_RUN), "--json"]) in (0, 1)
     report = json.loads(capsys.readouterr().out)
     assert report["format"] == "sb3" and report["updates"] == 19
-    assert {check["id"] for check in report["checked"]} == {rule.id for rule in RULES}
+    assert {check["id"] for check in report["checked"]} == {rule.id for rule in RULES_BY_SOURCE["sb3"]}
+    assert set(report["uncalibrated"]) == set(UNCALIBRATED["sb3"])  # said, not passed over in silence
 
 
 def test_json_names_each_finding_with_its_section(tmp_path, capsys):
