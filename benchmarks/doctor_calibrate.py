@@ -19,9 +19,13 @@ still in progress; a broken run whole. Each condition of a rule gets its thresho
   nearest broken run lies within it, or none lies beyond, the threshold is the extreme plus the margin, and the doctor
   misses that run rather than risk a false alarm on a healthy run the calibration did not see.
 
+Each library (each log source) gets its own thresholds, set on its own runs alone: the libraries log the same names
+for different measurements (minippo/doctor_logs.py), so a healthy range of one is not a healthy range of another.
+
 A rule with a second condition (a relative signature: the KL high while the clip fraction stays low) is there to tell
 its cause from others that share the first variable, so it must flag no healthy run and no run of another fault that
-the rules before it (the doctor reads them in order) do not already flag.
+the rules before it (the doctor reads them in order) do not already flag; where a condition has no such run to keep
+clear of, it is set against the healthy runs, as a one-condition rule is.
 Its second condition's cut is tried at each run of the rule's faults in turn; at each, the first condition's
 threshold is set by the principle above against the other runs the second lets through, and the cut that lets the
 rule catch the most runs of its faults is kept (the tightest, on a tie). The second condition's threshold is then set
@@ -29,8 +33,8 @@ by the principle against the other runs that meet the first.
 
 ``calibrate`` writes, in one go, everything the chapter's tables are made from: minippo/doctor_thresholds.json, the
 rule table as the code then has it (results/doctor_rules.csv: a row per check of the settings in doctor.CHECKS, then per
-condition of each rule in doctor.RULES) and the atlas's record summarised from its runs (``benchmarks.atlas
-summarize``: results/atlas_healthy_ranges.csv, atlas_signatures.csv, atlas_features.csv).
+condition of each rule of each source in doctor.RULES_BY_SOURCE) and the atlas's record summarised from its runs
+(``benchmarks.atlas summarize``: results/atlas_healthy_ranges.csv, atlas_signatures.csv, atlas_features.csv).
 
 ``evaluate`` runs the doctor, with the thresholds of the file, on every recorded run of a part: per rule its false
 alarms on healthy runs and its recall on the broken runs of the faults it names, and overall the healthy runs
@@ -57,7 +61,7 @@ from minippo.records import read_rows
 MANIFEST_CSV = common.RESULTS / "doctor_manifest.csv"  # benchmarks/doctor_runs.py plan
 RUN_ROOT = common.RUNS / "doctor"
 ATLAS_CSV = common.RESULTS / "atlas_runs.csv"
-RULES_CSV = common.RESULTS / "doctor_rules.csv"  # the rule table, as doctor.RULES has it after calibrate
+RULES_CSV = common.RESULTS / "doctor_rules.csv"  # the rule table, as doctor.RULES_BY_SOURCE has it after calibrate
 RULE_FIELDS = ["source", "rule", "condition", "variable", "window", "statistic", "level", "comparison", "threshold",
                "healthy_low", "healthy_high", "anchor", "causes"]  # fmt: skip
 PARTS = ("calibration", "held-out")
@@ -250,15 +254,20 @@ def calibrate_rule(rule: doctor.Rule, measured: list[tuple[Run, list[float]]], e
         def trial(edge):
             lets = sign * _to_scale(others[:, 1], second_scale) >= edge
             keeps = sign * _to_scale(broken[:, 1], second_scale) >= edge
-            entry = cut(others[lets, 0], broken[keeps, 0], first.comparison, scale)
+            # against the other runs the cut lets through; when it lets none, against the healthy runs, so that the
+            # first condition still tests something (a threshold beyond every healthy run's value)
+            negatives = others[lets, 0] if lets.any() else healthy[:, 0]
+            entry = cut(negatives, broken[keeps, 0], first.comparison, scale)
             return keeps & _flags(broken[:, 0], entry["threshold"], first.comparison), entry
 
         tried = [(int(trial(edge)[0].sum()), -index, edge) for index, edge in enumerate(order)]
         edge = max(tried)[2]
         caught, entry = trial(edge)
-        if caught.any():  # the second condition against the other runs that meet the first
-            also = cut(others[_flags(others[:, 0], entry["threshold"], first.comparison), 1], broken[caught, 1],
-                       second.comparison, second_scale)  # fmt: skip
+        meet = _flags(others[:, 0], entry["threshold"], first.comparison)
+        if caught.any() and meet.any():  # the second condition against the other runs that meet the first
+            also = cut(others[meet, 1], broken[caught, 1], second.comparison, second_scale)
+        elif caught.any():  # none meets the first: against the healthy runs, as a one-condition rule
+            also = cut(healthy[:, 1], broken[caught, 1], second.comparison, second_scale)
         else:  # no cut lets the first condition catch a run: the second is set against every other run
             also = cut(others[:, 1], broken[:, 1], second.comparison, second_scale)
         caught = _flags(broken[:, 0], entry["threshold"], first.comparison) & _flags(
@@ -311,7 +320,7 @@ def calibrate(runs_dir: Path, record_json: Path | None, manifest_csv: Path, atla
         "date": datetime.date.today().isoformat(),
         "runs": {CALIBRATION: counts, "held-out": {"read": 0, "in the manifest": len(manifest) - counts[
             "in the manifest"]}},  # fmt: skip
-        "principle": " ".join(" ".join(__doc__.split("\n\n")[2:5]).split()),
+        "principle": " ".join(" ".join(__doc__.split("\n\n")[2:6]).split()),
         "calibration runs": sorted(run.id for run in runs),
         "sources": sources,  # a log's source: {rule id: its thresholds}, set on that library's runs alone
     }

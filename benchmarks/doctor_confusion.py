@@ -75,11 +75,14 @@ def evaluate(part: str, runs_dir: Path, record_json: Path | None, manifest_csv: 
     rows = []
     every = {rule.id: rule for source_rules in rules.values() for rule in source_rules}  # each rule once
     for rule in (*doctor.CHECKS, *every.values()):
-        mine = [run for run in broken if names_fault(rule.id, run.fault)]
-        alarms = sum(rule.id in verdicts[run.id] for run in healthy)
-        caught = sum(rule.id in verdicts[run.id] for run in mine)
-        rows.append({"kind": "check" if isinstance(rule, doctor.Check) else "rule", "name": rule.id,
-                     "healthy_runs": len(healthy), "false_alarms": alarms, "broken_runs": len(mine), "flagged": caught,
+        check = isinstance(rule, doctor.Check)
+        sources = {source for source, source_rules in rules.items()
+                   if check or any(r.id == rule.id for r in source_rules)}  # the sources it has thresholds for
+        mine = [run for run in broken if names_fault(rule.id, run.fault) and run.library in sources]
+        judged = [run for run in healthy if run.library in sources]
+        rows.append({"kind": "check" if check else "rule", "name": rule.id, "healthy_runs": len(judged),
+                     "false_alarms": sum(rule.id in verdicts[run.id] for run in judged), "broken_runs": len(mine),
+                     "flagged": sum(rule.id in verdicts[run.id] for run in mine),
                      "first_right": sum(verdicts[run.id][:1] == [rule.id] for run in mine)})  # fmt: skip
     for fault in dict.fromkeys(run.fault for run in broken):
         mine = [run for run in broken if run.fault == fault]

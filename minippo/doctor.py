@@ -294,8 +294,8 @@ CHECKS = (
 
 
 def load_thresholds(path=THRESHOLDS_JSON) -> dict:
-    """The calibrated thresholds: {"rules": {rule id: {"threshold", "healthy", "also": {...}}}, and how they were
-    set}; an empty table when the file is missing."""
+    """The calibrated thresholds: {"sources": {source: {rule id: {"threshold", "healthy", "also": {...}}}}, and how
+    they were set}; an empty table when the file is missing."""
     try:
         return json.loads(Path(path).read_text(encoding="utf-8"))
     except FileNotFoundError:
@@ -411,11 +411,11 @@ def report(path, as_json: bool = False, settings=None) -> tuple[str, int]:
     rules = RULES_BY_SOURCE[log.source]
     findings = settings_found + diagnose(rows, rules, checks=())
     missing = {rule.id: rule.missing(rows, log) for rule in rules}
-    if all(missing.values()):
+    if rules and all(missing.values()):
         reasons = dict.fromkeys(reason.split(": ", 1)[1] for reason in missing.values())
         raise MinippoError(f"{path}: not enough data for any rule: " + "; ".join(reasons))
     measured = [(rule, *rule.measure(rows), rule.also.measure(rows)[0] if rule.also else math.nan) for rule in rules]
-    status = 1 if findings else 3 if any(missing.values()) else 0
+    status = 1 if findings else 3 if any(missing.values()) or not rules else 0  # no rule for its source: unchecked
     if as_json:
 
         def described(rule, value, first, last, also_value):

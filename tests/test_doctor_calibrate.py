@@ -47,13 +47,14 @@ CAUSES = {"healthy": "", "clip_10": "no-clip", "lr_x30": "kl-spike", "ent_-0.05"
 def campaign(root, runs=CAMPAIGN):
     """A manifest, a record and run folders (minippo's progress.csv) of ``runs`` under ``root``."""
     entries = []
-    for number, (fault, part, rows) in enumerate(runs):
-        run_id = f"minippo-defaults-CartPole-v1-{fault}-1x-seed{number}"
+    for number, (fault, part, rows, *library) in enumerate(runs):
+        library = library[0] if library else "minippo"
+        run_id = f"{library}-defaults-CartPole-v1-{fault}-1x-seed{number}"
         folder = root / "runs" / run_id
         folder.mkdir(parents=True)
         write_rows(folder / "progress.csv", PROGRESS_FIELDS,
                    [{key: row.get(key, 0) for key in PROGRESS_FIELDS} for row in rows])  # fmt: skip
-        entries.append({"id": run_id, "part": part, "library": "minippo", "settings": "defaults",
+        entries.append({"id": run_id, "part": part, "library": library, "settings": "defaults",
                         "task": "CartPole-v1", "fault": fault, "cause": CAUSES[fault]})  # fmt: skip
     write_rows(root / "manifest.csv", list(entries[0]), entries)
     (root / "record.json").write_text(json.dumps({"commands": [], "runs": [{"id": e["id"]} for e in entries]}))
@@ -268,3 +269,16 @@ def test_a_broken_run_is_harmed_when_it_ends_below_every_healthy_run_of_its_sett
     tuned = dc.Run("zoo", "campaign", "held-out", "sb3", "Acrobot-v1", "healthy", "", healthy[0].rows[:20] + [
         {"update": u, "return_mean": 0.0} for u in range(20, 40)], {}, "zoo", "1x")  # fmt: skip
     assert doctor_confusion.harmed(within, runs + [tuned]) == "no"  # a healthy run of other settings is no peer
+
+
+def test_each_source_is_calibrated_on_its_own_runs(tmp_path):
+    """A library that logs its KL 20 times larger (the same runs as another source) moves its own thresholds and
+    leaves minippo's as they were."""
+    louder = [(fault, part, [{**row, "approx_kl": 20 * row["approx_kl"]} for row in rows], "sb3")
+              for fault, part, rows in CAMPAIGN]  # fmt: skip
+    _, alone = calibrated_rules(tmp_path / "alone")
+    _, both = calibrated_rules(tmp_path / "both", CAMPAIGN + louder)
+    assert both["sources"]["minippo"] == alone["sources"]["minippo"]
+    assert both["sources"]["sb3"]["kl-spike"]["threshold"] > 10 * alone["sources"]["minippo"]["kl-spike"]["threshold"]
+    rules = doctor.calibrated(doctor.SIGNATURES, both, "sb3")
+    assert next(r for r in rules if r.id == "kl-spike").threshold == both["sources"]["sb3"]["kl-spike"]["threshold"]
