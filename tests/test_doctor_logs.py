@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from minippo.cli import main
-from minippo.doctor import RULES, diagnose, read_run, report
+from minippo.doctor import RULES, RULES_BY_SOURCE, diagnose, read_run, report
 from minippo.doctor_logs import SOURCES, read_log
 from minippo.errors import MinippoError
 from minippo.records import read_rows
@@ -122,7 +122,7 @@ def test_an_sb3_log_with_no_episode_ended_yet_says_where_the_return_is_missing(t
     returns = [row["return_mean"] for row in log.rows]
     assert all(math.isnan(r) for r in returns[:3]) and returns[3:] == [10.0 + u for u in range(4, 21)]
     assert "return_mean (rollout/ep_rew_mean) has no value on 3 of the 20 updates" in log.notes
-    assert diagnose(log.rows) == []
+    assert diagnose(log.rows, RULES_BY_SOURCE[log.source]) == []  # with its own source's thresholds
 
 
 def test_sb3s_tensorboard_log_reads_as_its_csv_log(tmp_path):
