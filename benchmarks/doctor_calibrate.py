@@ -417,7 +417,7 @@ def main(argv=None) -> int:
     from benchmarks.doctor_confusion import evaluate
 
     out = args.out or common.RESULTS / f"doctor_confusion_{args.part}.csv"
-    print(evaluate(args.part, args.runs, args.record, args.manifest, args.thresholds, out))
+    print(evaluate(args.part, args.runs, args.record, args.manifest, args.thresholds, out, argv))
     return 0
 
 

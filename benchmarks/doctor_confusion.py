@@ -3,18 +3,23 @@ PART`` runs ``minippo doctor``, with the thresholds of minippo/doctor_thresholds
 (benchmarks/doctor_calibrate.py reads them, opening no folder of another part), and writes per rule its false alarms
 on healthy runs and its recall on the broken runs of the faults it names, and overall the healthy runs flagged, the
 broken runs flagged, and those whose first finding names their fault among its causes; each once with the checks of
-the settings the logs carry and once with the rules alone.
+the settings the logs carry and once with the rules alone. Beside the table it writes how it was made
+(doctor_confusion_PART.json): the command, the commit, the date, the runs read, and the thresholds file's SHA-256 and
+commit, so that a page can check that both parts were judged with the same thresholds as the doctor has now.
 """
 
 from __future__ import annotations
 
+import datetime
+import hashlib
+import json
 import math
 from pathlib import Path
 
 import numpy as np
 
 from benchmarks import common
-from benchmarks.doctor_calibrate import FAULTS_NAMED, common_markdown, read_part
+from benchmarks.doctor_calibrate import CODE, FAULTS_NAMED, common_markdown, read_part
 from minippo import doctor
 
 
@@ -60,7 +65,7 @@ def _overall(name: str, healthy: list, broken: list, verdicts: dict, harm: dict)
 
 
 def evaluate(part: str, runs_dir: Path, record_json: Path | None, manifest_csv: Path, thresholds_json: Path,
-             out_csv: Path) -> str:  # fmt: skip
+             out_csv: Path, argv=None) -> str:  # fmt: skip
     """The doctor on every recorded run of ``part``: the checks of the settings its log carries, then the rules; and
     again with the rules alone (what the doctor makes of a log without settings)."""
     table = doctor.load_thresholds(thresholds_json)
@@ -103,6 +108,12 @@ def evaluate(part: str, runs_dir: Path, record_json: Path | None, manifest_csv: 
                 "harmed": harm.get(run.id, ""), "findings": " ".join(verdicts[run.id]) or "none",
                 "rules_only": " ".join(logs_only[run.id]) or "none"} for run in runs]  # fmt: skip
     common.write_rows(verdicts_path(out_csv), per_run)
+    made = {"command": common.invocation("doctor_calibrate", argv),
+            "commit": common.git_commit((*CODE, "benchmarks/doctor_confusion.py")),
+            "date": datetime.date.today().isoformat(), "part": part, "runs read": len(runs), "left out": left_out,
+            "thresholds": {"file": common.relative(thresholds_json), "commit": table.get("commit"),
+                           "sha256": hashlib.sha256(thresholds_json.read_bytes()).hexdigest()}}  # fmt: skip
+    out_csv.with_suffix(".json").write_text(json.dumps(made, indent=1) + "\n")
     return confusion_markdown(part, rows, left_out, table)
 
 

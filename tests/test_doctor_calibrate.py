@@ -2,6 +2,7 @@
 the doctor; its new rules on runs made of rows; evaluate's confusion counts."""
 
 import csv
+import hashlib
 import json
 import math
 
@@ -227,6 +228,9 @@ def test_evaluate_counts_false_alarms_recall_and_the_right_cause_first(tmp_path)
     assert "| healthy runs flagged (false alarms) | 1/2 (50%) | 1/2 (50%) |" in text
     assert "| the right cause named first | 2/3 (67%) | 1/3 (33%) |" in text
     assert doctor_confusion.verdicts_path(tmp_path / "out.csv").exists()
+    made = json.loads((tmp_path / "out.json").read_text())  # how the table was made, and with which thresholds
+    assert (made["part"], made["runs read"]) == ("calibration", 5)
+    assert made["thresholds"]["sha256"] == hashlib.sha256((tmp_path / "thresholds.json").read_bytes()).hexdigest()
     held_out = doctor_confusion.verdicts_path(dc.common.RESULTS / "doctor_confusion_held-out.csv")
     assert held_out.name == "doctor_verdicts_held-out.csv"
 
