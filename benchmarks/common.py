@@ -165,3 +165,9 @@ def run_sweep(runs, root, record_csv, fields: list[str], args, engine=None, more
     if engine is None:
         record_sweep(runs, root, record_csv, fields, more)
     return code
+
+
+def markdown_table(header: list, rows: list) -> str:
+    """A Markdown table: a header row, then a row per list of cells."""
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    return "\n".join(lines + ["| " + " | ".join(str(cell) for cell in row) + " |" for row in rows])

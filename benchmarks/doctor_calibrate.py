@@ -356,30 +356,6 @@ def _condition_rows(source: str, rule) -> list[dict]:
     return rows
 
 
-def calibration_table(record: dict) -> str:
-    rows = []
-    for source, entries in record["sources"].items():
-        for rule_id, entry in entries.items():
-            rule = next(r for r in doctor.SIGNATURES if r.id == rule_id)
-            for condition, part in zip(rule.conditions, [entry, entry.get("also")]):
-                rows.append([source, f"`{rule_id}`" if part is entry else "  and", f"{condition.statistic} of "
-                             f"`{condition.variable}`", f"{condition.comparison} {part['threshold']:.4g}",
-                             "–".join(f"{x:.3g}" for x in part["healthy"]), _number(part["nearest_negative"]),
-                             _number(part["nearest_broken"]), part["basis"],
-                             f"{entry['caught']}/{entry['broken_samples']}" if part is entry else ""])  # fmt: skip
-    return common_markdown(["source", "rule", "reads", "flags", "healthy runs", "nearest kept clear",
-                            "nearest broken", "set by", "its faults caught"], rows)  # fmt: skip
-
-
-def _number(value) -> str:
-    return "—" if value is None else f"{value:.4g}"
-
-
-def common_markdown(header: list, rows: list) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    return "\n".join(lines + ["| " + " | ".join(str(cell) for cell in row) + " |" for row in rows])
-
-
 @common.one_line_errors
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.doctor_calibrate", description=__doc__.split("\n\n")[0])
@@ -399,6 +375,8 @@ def main(argv=None) -> int:
                              "results/doctor_rules.csv)")  # fmt: skip
     evaluating.add_argument("--out", type=Path, help="default: results/doctor_confusion_PART.csv")
     args = parser.parse_args(argv)
+    from benchmarks.doctor_confusion import calibration_table, evaluate
+
     if args.command == "calibrate":
         if not args.no_atlas:
             from benchmarks import atlas_signatures
@@ -414,8 +392,6 @@ def main(argv=None) -> int:
         print(calibration_table(record))
         print(f"{common.relative(args.rules)}: the rule table")
         return 0
-    from benchmarks.doctor_confusion import evaluate
-
     out = args.out or common.RESULTS / f"doctor_confusion_{args.part}.csv"
     print(evaluate(args.part, args.runs, args.record, args.manifest, args.thresholds, out, argv))
     return 0

@@ -5,7 +5,8 @@ on healthy runs and its recall on the broken runs of the faults it names, and ov
 broken runs flagged, and those whose first finding names their fault among its causes; each once with the checks of
 the settings the logs carry and once with the rules alone. Beside the table it writes how it was made
 (doctor_confusion_PART.json): the command, the commit, the date, the runs read, and the thresholds file's SHA-256 and
-commit, so that a page can check that both parts were judged with the same thresholds as the doctor has now.
+commit, so that a page can check that both parts were judged with the same thresholds as the doctor has now. It also
+renders the table ``calibrate`` prints of the thresholds it set (calibration_table).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import common
-from benchmarks.doctor_calibrate import CODE, FAULTS_NAMED, common_markdown, read_part
+from benchmarks.doctor_calibrate import CODE, FAULTS_NAMED, read_part
 from minippo import doctor
 
 
@@ -142,15 +143,36 @@ def confusion_markdown(part: str, rows: list[dict], left_out: dict, table: dict)
         f"{part}: {total['healthy_runs']} healthy and {total['broken_runs']} broken runs"
         + (f" ({skipped}, left out)" if skipped else "")
         + f"; thresholds of {table.get('date', '?')}, commit {table.get('commit', '?')}",
-        common_markdown(["rule", "false alarms (healthy runs)", "recall (runs of the faults it names)",
+        common.markdown_table(["rule", "false alarms (healthy runs)", "recall (runs of the faults it names)",
                          "named first"], by_rule),
-        common_markdown(["fault", "flagged", "right cause first", "flagged, rules only",
+        common.markdown_table(["fault", "flagged", "right cause first", "flagged, rules only",
                          "right cause first, rules only", "missed by the rules, return no worse than healthy"],
                         by_fault),
-        common_markdown(["measure", "with the settings checks", "rules only"], [
+        common.markdown_table(["measure", "with the settings checks", "rules only"], [
             [name, *pair] for name, *pair in zip(
                 ["healthy runs flagged (false alarms)", "broken runs flagged", "the right cause named first",
                  "the manifest's rule named first", "broken runs missed whose return is no worse than healthy",
                  "broken runs flagged, of those the fault cost return"],
                 measures(total), measures(rules_only))]),
     ])  # fmt: skip
+
+
+def calibration_table(record: dict) -> str:
+    """What ``calibrate`` prints: per source, rule and condition, its threshold, the healthy range, the nearest runs on
+    either side, which of them set it, and the runs of its faults it catches."""
+    rows = []
+    for source, entries in record["sources"].items():
+        for rule_id, entry in entries.items():
+            rule = next(r for r in doctor.SIGNATURES if r.id == rule_id)
+            for condition, part in zip(rule.conditions, [entry, entry.get("also")]):
+                rows.append([source, f"`{rule_id}`" if part is entry else "  and", f"{condition.statistic} of "
+                             f"`{condition.variable}`", f"{condition.comparison} {part['threshold']:.4g}",
+                             "–".join(f"{x:.3g}" for x in part["healthy"]), _number(part["nearest_negative"]),
+                             _number(part["nearest_broken"]), part["basis"],
+                             f"{entry['caught']}/{entry['broken_samples']}" if part is entry else ""])  # fmt: skip
+    return common.markdown_table(["source", "rule", "reads", "flags", "healthy runs", "nearest kept clear",
+                                  "nearest broken", "set by", "its faults caught"], rows)  # fmt: skip
+
+
+def _number(value) -> str:
+    return "—" if value is None else f"{value:.4g}"
