@@ -64,7 +64,7 @@ ATLAS_CSV = common.RESULTS / "atlas_runs.csv"
 RULES_CSV = common.RESULTS / "doctor_rules.csv"  # the rule table, as doctor.RULES_BY_SOURCE has it after calibrate
 RULE_FIELDS = ["source", "rule", "condition", "variable", "window", "statistic", "level", "comparison", "threshold",
                "healthy_low", "healthy_high", "anchor", "causes"]  # fmt: skip
-PARTS = ("calibration", "held-out")
+PARTS = ("calibration", "held-out", "replication")  # the replication: doctor_runs.replication, a manifest of its own
 CALIBRATION = "calibration"
 CODE = ("minippo", "benchmarks/doctor_calibrate.py", ":(exclude)minippo/doctor_thresholds.json")  # what sets them
 PREFIXES = (10, 15, 40)  # a healthy run is also measured cut to its first updates
@@ -393,6 +393,10 @@ def main(argv=None) -> int:
         print(f"{common.relative(args.rules)}: the rule table")
         return 0
     out = args.out or common.RESULTS / f"doctor_confusion_{args.part}.csv"
+    if args.part == "replication" and args.manifest == MANIFEST_CSV:
+        from benchmarks.doctor_runs import REPLICATION_CSV, REPLICATION_JSON
+
+        args.manifest, args.record = REPLICATION_CSV, args.record or REPLICATION_JSON
     print(evaluate(args.part, args.runs, args.record, args.manifest, args.thresholds, out, argv))
     return 0
 

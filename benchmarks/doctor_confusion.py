@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import common
-from benchmarks.doctor_calibrate import CODE, FAULTS_NAMED, read_part
+from benchmarks.doctor_calibrate import CODE, FAULTS_NAMED, MANIFEST_CSV, read_part
 from minippo import doctor
 
 
@@ -43,9 +43,10 @@ def final_return(run) -> float:
 
 
 def harmed(run, runs) -> str:
-    """Whether a broken run's fault cost it return: "yes" when it ended below every healthy run of its library,
-    settings, task and length in the part, "no" when it did not, "n/a" when there is no such healthy run or the logged
-    return is not the task's (a zeroed reward logs the zeroed return)."""
+    """Whether a broken run's fault cost it return: "yes" when it ended below every healthy run of ``runs`` of its
+    library, settings, task and length (its part's; for the replication, both other parts': four seeds), "no" when it
+    did not, "n/a" when there is no such healthy run or the logged return is not the task's (a zeroed reward logs the
+    zeroed return)."""
     peers = [final_return(other) for other in runs if other.healthy and (other.library, other.preset, other.task,
              other.length) == (run.library, run.preset, run.task, run.length)]  # fmt: skip
     if run.fault == "reward_zero" or not peers:
@@ -77,7 +78,9 @@ def evaluate(part: str, runs_dir: Path, record_json: Path | None, manifest_csv: 
     logs_only = {run.id: [f.rule.id for f in doctor.diagnose(run.rows, rules[run.library], checks=())] for run in runs}
     healthy = [run for run in runs if run.healthy]
     broken = [run for run in runs if not run.healthy]
-    harm = {run.id: harmed(run, runs) for run in broken}
+    peers = runs if healthy else [run for spent in ("calibration", "held-out") for run in
+                                  read_part(spent, runs_dir, MANIFEST_CSV)[0] if run.healthy]  # fmt: skip
+    harm = {run.id: harmed(run, peers) for run in broken}
     rows = []
     every = {rule.id: rule for source_rules in rules.values() for rule in source_rules}  # each rule once
     for rule in (*doctor.CHECKS, *every.values()):

@@ -149,3 +149,20 @@ def test_a_tiny_cleanrl_run_logs_cleanrls_scalars(tmp_path):
     assert [event.step for event in events.Scalars("losses/approx_kl")] == list(range(512, 4097, 512))
     rates = [event.value for event in events.Scalars("charts/learning_rate")]
     assert rates[:2] == pytest.approx([2.5e-4, 2.5e-4 * 7 / 8])  # annealed over the 8 iterations
+
+
+def test_the_replication_is_the_held_out_faults_again_at_a_seed_none_of_them_had():
+    replicated = doctor_runs.replication()
+    held_out = [e for e in doctor_runs.manifest() if e.part == "held-out" and e.fault != "healthy"]
+    assert [(e.library, e.settings, e.task, e.fault, e.length) for e in replicated] == [
+        (e.library, e.settings, e.task, e.fault, e.length) for e in held_out]  # fmt: skip
+    assert {e.seed for e in held_out} == {1} and {e.seed for e in replicated} == {doctor_runs.REPLICATION_SEED} != {1}
+    assert not {e.id for e in replicated} & {e.id for e in doctor_runs.manifest()}
+    assert {e.part for e in replicated} == {doctor_runs.REPLICATION}
+
+
+def test_the_replication_keeps_its_own_record(capsys):
+    mixed = [doctor_runs.replication()[0].id, doctor_runs.manifest()[0].id]
+    with pytest.raises(SystemExit) as stopped:
+        doctor_runs.main(["run", "--only", *mixed])
+    assert stopped.value.code == 2 and "record of their own" in capsys.readouterr().err
