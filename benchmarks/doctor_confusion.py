@@ -63,7 +63,9 @@ def _overall(name: str, healthy: list, broken: list, verdicts: dict, harm: dict)
             "first_rule_expected": sum(verdicts[run.id][:1] == [run.cause] for run in broken),
             "unharmed_missed": sum(not verdicts[run.id] and harm[run.id] == "no" for run in broken),
             "harmed_runs": sum(harm[run.id] == "yes" for run in broken),
-            "harmed_flagged": sum(bool(verdicts[run.id]) and harm[run.id] == "yes" for run in broken)}  # fmt: skip
+            "harmed_flagged": sum(bool(verdicts[run.id]) and harm[run.id] == "yes" for run in broken),
+            "harmed_first_right": sum(bool(verdicts[run.id]) and harm[run.id] == "yes"
+                                      and names_fault(verdicts[run.id][0], run.fault) for run in broken)}  # fmt: skip
 
 
 def evaluate(part: str, runs_dir: Path, record_json: Path | None, manifest_csv: Path, thresholds_json: Path,
@@ -105,7 +107,8 @@ def evaluate(part: str, runs_dir: Path, record_json: Path | None, manifest_csv: 
     rows.append(_overall("all runs", healthy, broken, verdicts, harm))
     rows.append(_overall("all runs, rules only", healthy, broken, logs_only, harm))
     fields = ["kind", "name", "healthy_runs", "false_alarms", "broken_runs", "flagged", "first_right",
-              "first_rule_expected", "unharmed_missed", "harmed_runs", "harmed_flagged"]  # fmt: skip
+              "first_rule_expected", "unharmed_missed", "harmed_runs", "harmed_flagged",
+              "harmed_first_right"]  # fmt: skip
     common.write_rows(out_csv, rows, fields)
     per_run = [{"id": run.id, "library": run.library, "task": run.task, "fault": run.fault, "updates": len(run.rows),
                 "settings": "yes" if run.settings else "no", "final_return": f"{final_return(run):.4g}",
@@ -140,7 +143,8 @@ def confusion_markdown(part: str, rows: list[dict], left_out: dict, table: dict)
     def measures(r):
         return [_share(r["false_alarms"], r["healthy_runs"]), _share(r["flagged"], r["broken_runs"]),
                 _share(r["first_right"], r["broken_runs"]), _share(r["first_rule_expected"], r["broken_runs"]),
-                str(r["unharmed_missed"]), _share(r["harmed_flagged"], r["harmed_runs"])]
+                str(r["unharmed_missed"]), _share(r["harmed_flagged"], r["harmed_runs"]),
+                _share(r["harmed_first_right"], r["harmed_runs"])]
 
     return "\n\n".join([
         f"{part}: {total['healthy_runs']} healthy and {total['broken_runs']} broken runs"
@@ -155,7 +159,8 @@ def confusion_markdown(part: str, rows: list[dict], left_out: dict, table: dict)
             [name, *pair] for name, *pair in zip(
                 ["healthy runs flagged (false alarms)", "broken runs flagged", "the right cause named first",
                  "the manifest's rule named first", "broken runs missed whose return is no worse than healthy",
-                 "broken runs flagged, of those the fault cost return"],
+                 "broken runs flagged, of those the fault cost return",
+                 "the right cause named first, of those the fault cost return"],
                 measures(total), measures(rules_only))]),
     ])  # fmt: skip
 
