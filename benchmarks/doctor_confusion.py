@@ -69,9 +69,11 @@ def _overall(name: str, healthy: list, broken: list, verdicts: dict, harm: dict)
 
 
 def evaluate(part: str, runs_dir: Path, record_json: Path | None, manifest_csv: Path, thresholds_json: Path,
-             out_csv: Path, argv=None) -> str:  # fmt: skip
+             out_csv: Path, argv=None, peers: tuple[Path, Path | None] = (MANIFEST_CSV, None)) -> str:  # fmt: skip
     """The doctor on every recorded run of ``part``: the checks of the settings its log carries, then the rules; and
-    again with the rules alone (what the doctor makes of a log without settings)."""
+    again with the rules alone (what the doctor makes of a log without settings). A part without healthy runs (the
+    replication) is judged for harm against the healthy runs of the calibration and held-out parts of ``peers`` (a
+    manifest and its record; by default the campaign's), read from ``runs_dir``."""
     table = doctor.load_thresholds(thresholds_json)
     rules = {source: doctor.calibrated(doctor.SIGNATURES, table, source) for source in doctor.SOURCES}
     runs, left_out = read_part(part, runs_dir, manifest_csv, record_json)
@@ -81,7 +83,7 @@ def evaluate(part: str, runs_dir: Path, record_json: Path | None, manifest_csv: 
     healthy = [run for run in runs if run.healthy]
     broken = [run for run in runs if not run.healthy]
     peers = runs if healthy else [run for spent in ("calibration", "held-out") for run in
-                                  read_part(spent, runs_dir, MANIFEST_CSV)[0] if run.healthy]  # fmt: skip
+                                  read_part(spent, runs_dir, *peers)[0] if run.healthy]  # fmt: skip
     harm = {run.id: harmed(run, peers) for run in broken}
     rows = []
     every = {rule.id: rule for source_rules in rules.values() for rule in source_rules}  # each rule once

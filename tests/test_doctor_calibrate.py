@@ -221,6 +221,7 @@ def test_evaluate_counts_false_alarms_recall_and_the_right_cause_first(tmp_path)
     assert (rows["overall", "all runs, rules only"]["unharmed_missed"], rows["overall", "all runs"]["unharmed_missed"]
             ) == ("1", "0")  # fmt: skip
     assert (rows["overall", "all runs"]["harmed_runs"], rows["overall", "all runs"]["harmed_flagged"]) == ("1", "1")
+    assert rows["overall", "all runs"]["harmed_first_right"] == "0"  # flagged, but kl-spike named first: not ε
     assert (rows["rule", "kl-spike"]["false_alarms"], rows["rule", "kl-spike"]["broken_runs"]) == ("1", "0")
     assert (rows["rule", "no-clip"]["flagged"], rows["rule", "no-clip"]["broken_runs"]) == ("1", "2")
     assert (rows["fault", "clip_10"]["flagged"], rows["fault", "clip_10"]["first_right"]) == ("2", "1")
@@ -286,3 +287,16 @@ def test_each_source_is_calibrated_on_its_own_runs(tmp_path):
     assert both["sources"]["sb3"]["kl-spike"]["threshold"] > 10 * alone["sources"]["minippo"]["kl-spike"]["threshold"]
     rules = doctor.calibrated(doctor.SIGNATURES, both, "sb3")
     assert next(r for r in rules if r.id == "kl-spike").threshold == both["sources"]["sb3"]["kl-spike"]["threshold"]
+
+
+def test_the_replication_is_judged_for_harm_against_the_healthy_runs_of_the_other_parts(tmp_path):
+    ending = {"healthy": (20.0, 30.0), "vf_0": (10.0,), "lr_x30": (25.0,)}  # vf_0 ends below both; lr_x30 between
+    runs = [(fault, "replication" if fault != "healthy" else part, rows_of(return_mean=list(np.linspace(5, end, N))))
+            for fault, ends in ending.items() for part, end in zip(("calibration", "held-out"), ends)]  # fmt: skip
+    folder, record, manifest = campaign(tmp_path, runs)
+    (tmp_path / "thresholds.json").write_text(json.dumps({"rules": {}}))
+    doctor_confusion.evaluate("replication", folder, record, manifest, tmp_path / "thresholds.json",
+                              tmp_path / "out.csv", peers=(manifest, record))  # fmt: skip
+    verdicts = {row["fault"]: row for row in read_rows(doctor_confusion.verdicts_path(tmp_path / "out.csv"))}
+    assert set(verdicts) == {"vf_0", "lr_x30"}  # the healthy runs are peers, not judged
+    assert (verdicts["vf_0"]["harmed"], verdicts["lr_x30"]["harmed"]) == ("yes", "no")
