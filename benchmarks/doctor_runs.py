@@ -403,7 +403,7 @@ def code_commit() -> str:
 
 def run(part: str | None, only: list[str], jobs: int, argv) -> int:
     chosen = [by_id(name) for name in only] if only else [e for e in manifest() if part in (None, e.part)]
-    chosen = replication() if part == REPLICATION else chosen
+    chosen = replication() if part == REPLICATION and not only else chosen
     if len({e.part == REPLICATION for e in chosen}) > 1:
         raise common.BenchmarkError("the replication's runs have a record of their own: name them apart")
     record_json = REPLICATION_JSON if chosen and chosen[0].part == REPLICATION else RECORD_JSON
