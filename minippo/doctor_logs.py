@@ -379,13 +379,16 @@ def _named_settings(source: str, named: dict, where: str, notes: list) -> dict:
     return settings
 
 
-def _yaml_table(config: Path, notes: list) -> dict | None:
-    """The mapping in a YAML file such as rl-zoo's config.yml (an OrderedDict dumped by PyYAML), or None (a note)."""
+_UNREAD = object()  # a settings file that could not be parsed (a note says why)
+
+
+def _yaml_table(config: Path, notes: list):
+    """What a YAML file such as rl-zoo's config.yml holds (an OrderedDict dumped by PyYAML as a dict), or _UNREAD."""
     try:
         import yaml
     except ImportError:
         notes.append(f"{config}: reading it needs the PyYAML package (pip install 'minippo[doctor]'): no settings read")
-        return None
+        return _UNREAD
 
     class Loader(yaml.SafeLoader):  # rl-zoo dumps an OrderedDict: a python/object/apply tag over a list of pairs
         pass
@@ -398,30 +401,28 @@ def _yaml_table(config: Path, notes: list) -> dict | None:
         named = yaml.load(config.read_text(encoding="utf-8"), Loader=Loader)  # noqa: S506 (a SafeLoader)
     except (yaml.YAMLError, UnicodeDecodeError, ValueError, TypeError, IndexError) as error:
         notes.append(f"{config} cannot be read as YAML ({str(error).splitlines()[0]}): no settings read")
-        return None
-    if not isinstance(named, dict):
-        notes.append(f"{config} holds no table of hyperparameters: no settings read")
-        return None
+        return _UNREAD
     return named
 
 
-def _json_table(config: Path, notes: list) -> dict | None:
+def _json_table(config: Path, notes: list):
+    """What a JSON file holds, or _UNREAD."""
     try:
-        named = json.loads(config.read_text(encoding="utf-8"))
+        return json.loads(config.read_text(encoding="utf-8"))
     except (ValueError, UnicodeDecodeError) as error:
         notes.append(f"{config} cannot be read as JSON ({error}): no settings read")
-        return None
-    if not isinstance(named, dict):
-        notes.append(f"{config} holds no table of settings: no settings read")
-        return None
-    return named
+        return _UNREAD
 
 
 def _settings_file(source: str, config: Path, notes: list) -> dict:
     """The settings in ``config`` (JSON or YAML), in the source's names; an SB3 file gets SB3's PPO defaults for what
     it leaves out, as rl-zoo's config.yml leaves out what a task's entry does not change."""
-    named = (_yaml_table if config.suffix in (".yml", ".yaml") else _json_table)(config, notes)
-    if named is None:
+    yaml_file = config.suffix in (".yml", ".yaml")
+    named = (_yaml_table if yaml_file else _json_table)(config, notes)
+    if named is _UNREAD:
+        return {}
+    if not isinstance(named, dict):
+        notes.append(f"{config} holds no table of {'hyperparameters' if yaml_file else 'settings'}: no settings read")
         return {}
     if not any(names[source] in named for names in SETTINGS.values()) and not (source == "sb3" and "policy" in named):
         notes.append(f"{config} holds none of the settings the doctor checks ("

@@ -15,7 +15,7 @@ from minippo.cli import main
 from minippo.doctor import RULES, RULES_BY_SOURCE, diagnose, read_run, report
 from minippo.doctor_logs import SOURCES, read_log
 from minippo.errors import MinippoError
-from minippo.records import read_rows
+from minippo.records import read_rows, write_rows
 
 N_STEPS = 256  # environment steps an iteration, in the logs made here
 
@@ -400,10 +400,7 @@ def test_a_clip_range_of_1_or_more_is_out_of_bounds_and_a_minippo_config_is_read
              "value_loss": 20.0 - 0.1 * i} for i in range(len(table))]  # fmt: skip
     minippo_run = tmp_path / "minippo"
     minippo_run.mkdir()
-    with open(minippo_run / "progress.csv", "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    write_rows(minippo_run / "progress.csv", list(rows[0]), rows)
     (minippo_run / "config.json").write_text(json.dumps(Config(env_id="CartPole-v1", clip_epsilon=1.0).to_dict()))
     assert read_log(minippo_run).settings["clip_epsilon"] == 1.0
     assert main(["doctor", str(minippo_run)]) == 1
@@ -441,10 +438,7 @@ def test_a_minippo_config_that_is_not_a_table_or_has_no_numbers_is_a_note(tmp_pa
              "entropy": 0.69 - 0.001 * u, "explained_variance": 0.5, "value_loss": 20.0} for u in range(1, 21)]
     run = tmp_path / "minippo"
     run.mkdir()
-    with open(run / "progress.csv", "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    write_rows(run / "progress.csv", list(rows[0]), rows)
     for text, says in [("[1, 2]", "holds no table of settings"), ("null", "holds no table of settings"),
                        ("{not json", "cannot be read as JSON"),
                        ('{"lr": 1' + "0" * 400 + ', "value_coef": 0.5}', "lr = ")]:  # fmt: skip
