@@ -237,7 +237,7 @@ def test_evaluate_counts_false_alarms_recall_and_the_right_cause_first(tmp_path)
 
 
 def test_each_rule_names_faults_that_exist_and_each_campaign_fault_is_named_by_the_rule_it_expects():
-    from benchmarks.doctor_runs import FAULTS
+    from benchmarks.doctor_libraries import FAULTS
 
     atlas_modes = set(json.loads((dc.common.RESULTS / "atlas_runs.json").read_text())["modes"])
     assert set(dc.FAULTS_NAMED) == {rule.id for rule in (*doctor.SIGNATURES, *doctor.CHECKS)}

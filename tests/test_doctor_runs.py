@@ -9,8 +9,9 @@ import random
 
 import pytest
 
-from benchmarks import doctor_runs
-from benchmarks.doctor_runs import FAULTS, FIELDS, PARTS
+from benchmarks import doctor_libraries, doctor_runs
+from benchmarks.doctor_libraries import FAULTS, FIELDS
+from benchmarks.doctor_runs import PARTS
 from minippo.doctor import MIN_UPDATES
 from minippo.records import read_rows
 
@@ -20,8 +21,8 @@ needs_tensorboard = pytest.mark.skipif(importlib.util.find_spec("tensorboard") i
 
 
 def settings_of(entry) -> dict:
-    maker = {"minippo": lambda e: doctor_runs.minippo_config(e).to_dict(), "sb3": doctor_runs.sb3_settings,
-             "cleanrl": doctor_runs.cleanrl_settings}  # fmt: skip
+    maker = {"minippo": lambda e: doctor_libraries.minippo_config(e).to_dict(), "sb3": doctor_libraries.sb3_settings,
+             "cleanrl": doctor_libraries.cleanrl_settings}  # fmt: skip
     return maker[entry.library](entry)
 
 
@@ -55,7 +56,7 @@ def test_every_run_is_long_enough_for_the_doctor_to_judge(library):
     if library == "sb3" and importlib.util.find_spec("stable_baselines3") is None:
         pytest.skip("no stable-baselines3 (its batch size comes from SB3's own defaults)")
     entries = [entry for entry in doctor_runs.manifest() if entry.library == library]
-    assert entries and all(doctor_runs.updates_of(entry) >= MIN_UPDATES for entry in entries)
+    assert entries and all(doctor_libraries.updates_of(entry) >= MIN_UPDATES for entry in entries)
 
 
 @needs_sb3
@@ -82,8 +83,8 @@ def test_the_step_size_is_ten_times_each_librarys_default():
 def test_the_zero_reward_is_zero_through_each_librarys_wrappers():
     from benchmarks import cleanrl_ppo
 
-    for env in (doctor_runs.make_task("CartPole-v1", True),
-                cleanrl_ppo.wrapped(lambda: doctor_runs.make_task("Pendulum-v1", True), True, 0.99)):  # fmt: skip
+    for env in (doctor_libraries.make_task("CartPole-v1", True),
+                cleanrl_ppo.wrapped(lambda: doctor_libraries.make_task("Pendulum-v1", True), True, 0.99)):  # fmt: skip
         env.reset(seed=0)
         rewards = []
         for _ in range(20):
@@ -107,7 +108,8 @@ def test_a_recorded_run_is_not_made_again(tmp_path, monkeypatch, capsys):
 
 def tiny_run(entry_id: str, folder) -> dict:
     entry = doctor_runs.by_id(entry_id)
-    return doctor_runs.make_run(dataclasses.replace(entry, tiny=max(doctor_runs.batch_of(entry), 4096)), folder)
+    tiny = dataclasses.replace(entry, tiny=max(doctor_libraries.batch_of(entry), 4096))
+    return doctor_libraries.make_run(tiny, folder)
 
 
 @pytest.mark.slow
